@@ -1,0 +1,20 @@
+# The two commands (see README.md): `make demo` and `make test`. Both set up on first use.
+SHELL := /bin/bash
+ENV := source scripts/env.sh &&
+
+.PHONY: setup test demo bench clean
+
+setup:
+	@bash scripts/setup.sh
+
+test: setup
+	@$(ENV) python -m pytest
+
+demo: setup
+	@$(ENV) scripts/rrtq run scenarios/plant_only.yaml --out runs/plant-only --overwrite
+
+bench: setup
+	@$(ENV) python benchmarks/run_all.py
+
+clean:
+	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log .stamps

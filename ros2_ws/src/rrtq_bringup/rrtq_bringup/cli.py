@@ -1,0 +1,85 @@
+"""``rrtq``: run scenarios, and (as they land) plan, report and benchmark.
+
+Exit codes: 0 success, 1 failed mission, 2 bad input (nothing started).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import pathlib
+import sys
+
+EXIT_BAD_INPUT = 2
+
+
+def _speed(text: str) -> float:
+    if text == 'max':
+        return 0.0
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected 'max' or a positive factor, got {text!r}")
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f'speed factor must be > 0, got {text}')
+    return value
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog='rrtq', description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = parser.add_subparsers(dest='command', required=True)
+    run = sub.add_parser('run', help='run a scenario end to end, recorded to MCAP')
+    run.add_argument('scenario', type=pathlib.Path, help='scenario YAML file')
+    run.add_argument('--out', type=pathlib.Path,
+                     help='output directory (default: runs/<scenario name>)')
+    run.add_argument('--seed', type=int, help="override the scenario's seed")
+    run.add_argument('--speed', type=_speed, default=0.0,
+                     help="'max' (lock-step, default) or a wall-clock pace factor, e.g. 1.0")
+    run.add_argument('--mode', choices=('processes', 'composed'), default='processes',
+                     help='one process per node (default) or all nodes on one executor')
+    run.add_argument('--overwrite', action='store_true',
+                     help='replace an existing recording in the output directory')
+    return parser
+
+
+def cmd_run(args: argparse.Namespace) -> int:
+    from rrtq_bringup.orchestrator import BadInput, Run, RunOptions, check_supported
+    from rrtq_sim.scenario import ScenarioError, load_scenario
+
+    try:
+        scenario = load_scenario(args.scenario, seed=args.seed)
+        check_supported(scenario)
+        out = args.out or pathlib.Path('runs') / scenario.name
+        if (out / 'run.mcap').exists() and not args.overwrite:
+            raise BadInput(f'{out / "run.mcap"} exists; choose another --out or pass '
+                           '--overwrite')
+    except (ScenarioError, BadInput) as exc:
+        print(f'rrtq: error: {exc}', file=sys.stderr)
+        return EXIT_BAD_INPUT
+    for stale in ('run.mcap', 'summary.json'):
+        (out / stale).unlink(missing_ok=True)
+    options = RunOptions(out_dir=out, speed=args.speed, mode=args.mode)
+    print(f'rrtq: running {scenario.name} (seed {scenario.seed}, {args.mode}, speed '
+          f"{'max' if args.speed == 0 else args.speed}) -> {out}", file=sys.stderr)
+    code = Run(scenario, options).execute()
+    summary = json.loads((out / 'summary.json').read_text())
+    print(json.dumps({k: summary[k] for k in ('success', 'outcome', 'reason', 'sim_time_s',
+                                               'sim_speedup', 'recording')}))
+    if summary.get('failed_node'):
+        failed = summary['failed_node']
+        print(f"rrtq: node '{failed['node']}' {failed['status']}; last lines of its log:",
+              file=sys.stderr)
+        print('\n'.join('  ' + line for line in failed['log_tail']), file=sys.stderr)
+    return code
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if args.command == 'run':
+        return cmd_run(args)
+    return EXIT_BAD_INPUT
+
+
+if __name__ == '__main__':
+    sys.exit(main())

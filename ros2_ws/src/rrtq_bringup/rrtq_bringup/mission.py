@@ -1,0 +1,136 @@
+"""Mission bookkeeping from the robot's odometry (no rclpy): when a run ends, and how it went.
+
+The monitor judges against the true obstacles of the scenario, not against what any
+node believes: the collision check here is the referee's, not the safety node's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from rrtq_sim.obstacles import point_polygon_distance
+from rrtq_sim.perception import Perception
+from rrtq_sim.scenario import ObstacleSpec
+
+
+class Outcome(enum.StrEnum):
+    """How a run ended."""
+
+    RUNNING = 'running'
+    GOAL_REACHED = 'goal_reached'
+    COLLISION = 'collision'
+    DURATION = 'duration_elapsed'
+    NODE_FAILED = 'node_failed'
+    INTERRUPTED = 'interrupted'
+
+
+@dataclasses.dataclass(frozen=True)
+class MissionConfig:
+    """What ends a run."""
+
+    goal: tuple[float, float]      # m
+    goal_tolerance: float          # m, distance to the goal that counts as reached
+    duration: float                # s of sim time
+    robot_radius: float            # m
+    dt: float                      # s, plant step (for the effort integral)
+    stop_at_goal: bool = True      # plant-only runs drive a script: they run out the clock
+
+
+def _percentiles(values: Sequence[float], qs: Sequence[float]) -> dict[str, float | None]:
+    names = {50: 'median', 95: 'p95', 99: 'p99', 100: 'max'}
+    if not values:
+        return {names[q]: None for q in qs}
+    arr = np.asarray(values, dtype=float)
+    return {names[q]: float(np.percentile(arr, q)) for q in qs}
+
+
+class MissionMonitor:
+    """Feeds on odometry and commands; says when the run is over and summarises it."""
+
+    def __init__(self, config: MissionConfig, obstacles: Sequence[ObstacleSpec]) -> None:
+        self.config = config
+        self.obstacles = tuple(obstacles)
+        self.outcome = Outcome.RUNNING
+        self.reason = ''
+        self.t = 0.0
+        self.steps = 0
+        self.position: np.ndarray | None = None
+        self.path_length = 0.0
+        self.control_effort = 0.0
+        self.min_clearance = math.inf
+        self.time_to_goal: float | None = None
+        self.collided = False
+        self.controller_step_ms: list[float] = []
+        self.replan_ms: list[float] = []
+        self.replans = 0
+
+    def clearance(self, position: np.ndarray, t: float) -> float:
+        """Distance from the robot's disc to the nearest obstacle existing at ``t``."""
+        best = math.inf
+        for spec in self.obstacles:
+            if Perception.exists(spec, t):
+                dist = float(point_polygon_distance(position[None, :], spec.polygon)[0])
+                best = min(best, dist - self.config.robot_radius)
+        return best
+
+    def on_odometry(self, t: float, position: np.ndarray) -> Outcome:
+        """Account one odometry sample; returns the (possibly new) outcome."""
+        if self.outcome is not Outcome.RUNNING:
+            return self.outcome
+        if self.position is not None:
+            self.path_length += float(np.linalg.norm(position - self.position))
+        self.position = np.asarray(position, dtype=float).copy()
+        self.t = t
+        self.steps += 1
+        clearance = self.clearance(self.position, t)
+        self.min_clearance = min(self.min_clearance, clearance)
+        goal_dist = float(np.linalg.norm(self.position - np.asarray(self.config.goal)))
+        if clearance < 0.0:
+            self.collided = True
+            self.finish(Outcome.COLLISION, f'collision at t={t:.2f} s, position '
+                        f'({position[0]:.2f}, {position[1]:.2f}), {-clearance:.3f} m deep')
+        elif goal_dist <= self.config.goal_tolerance and self.time_to_goal is None:
+            self.time_to_goal = t
+            if self.config.stop_at_goal:
+                self.finish(Outcome.GOAL_REACHED, f'goal reached at t={t:.2f} s')
+        elif t >= self.config.duration - 1e-9:
+            self.finish(Outcome.DURATION, f'duration {self.config.duration:g} s elapsed')
+        return self.outcome
+
+    def on_command(self, u: np.ndarray) -> None:
+        """Account one step of commanded force (effort = sum of |u|^2 dt, N^2 s)."""
+        if self.outcome is Outcome.RUNNING:
+            self.control_effort += float(np.dot(u, u)) * self.config.dt
+
+    def finish(self, outcome: Outcome, reason: str) -> None:
+        if self.outcome is Outcome.RUNNING:
+            self.outcome, self.reason = outcome, reason
+
+    @property
+    def success(self) -> bool:
+        """Reached the goal without touching an obstacle."""
+        return self.time_to_goal is not None and not self.collided and self.outcome in (
+            Outcome.GOAL_REACHED, Outcome.DURATION)
+
+    def summary(self) -> dict:
+        """The fields of summary.json that odometry and commands determine."""
+        return {
+            'success': self.success,
+            'collided': self.collided,
+            'outcome': str(self.outcome),
+            'reason': self.reason,
+            'time_to_goal_s': self.time_to_goal,
+            'sim_time_s': round(self.t, 9),
+            'steps': self.steps,
+            'path_length_m': self.path_length,
+            'control_effort': self.control_effort,
+            'min_clearance_m': None if math.isinf(self.min_clearance) else self.min_clearance,
+            'replans': self.replans,
+            'replan_ms': _percentiles(self.replan_ms, (50, 95, 100)),
+            'controller_step_ms': _percentiles(self.controller_step_ms, (50, 95)),
+        }

@@ -1,0 +1,279 @@
+"""Start a run's node graph, watch it, stop it, and write its summary.
+
+``processes`` mode starts one OS process per node (as deployed); ``composed`` puts
+every node on one executor in this process. The supervisor node always runs here.
+A child process gets SIGTERM from the kernel if this process dies, even by SIGKILL
+(``PR_SET_PDEATHSIG``), so no node outlives its orchestrator.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import dataclasses
+import fcntl
+import importlib
+import json
+import os
+import pathlib
+import random
+import signal
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+
+import yaml
+
+from rrtq_bringup.graph import NodeSpec, build_graph
+from rrtq_bringup.mission import MissionConfig, MissionMonitor, Outcome
+from rrtq_sim.scenario import Scenario
+
+EXIT_SUCCESS, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
+DOMAIN_LOCK_DIR = pathlib.Path('/tmp/rrtq-domains')
+IMPLEMENTED_VARIANTS = ('open_loop',)
+
+
+@dataclasses.dataclass(frozen=True)
+class RunOptions:
+    """How to run a scenario."""
+
+    out_dir: pathlib.Path
+    speed: float = 0.0                 # 0: lock-step as fast as possible; > 0: pace factor
+    mode: str = 'processes'            # processes | composed
+    goal_tolerance: float = 0.5        # m
+    start_timeout_s: float = 60.0      # wall time allowed before the first step
+    stall_timeout_s: float = 20.0      # wall time without a new step before giving up
+
+
+class BadInput(Exception):
+    """A problem with the user's input: reported with exit code 2, nothing started."""
+
+
+@contextlib.contextmanager
+def domain_id() -> Iterator[int]:
+    """Hold an unused ROS_DOMAIN_ID (1-101) for the run; the lock dies with the process."""
+    DOMAIN_LOCK_DIR.mkdir(parents=True, exist_ok=True)
+    candidates = list(range(1, 102))
+    random.Random(os.getpid()).shuffle(candidates)
+    for candidate in candidates:
+        handle = open(DOMAIN_LOCK_DIR / f'{candidate}.lock', 'w')  # noqa: SIM115
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        try:
+            yield candidate
+        finally:
+            handle.close()
+        return
+    raise RuntimeError('no free ROS_DOMAIN_ID in 1..101')
+
+
+def ros_env(domain: int) -> dict[str, str]:
+    """Environment of every process of a run: DDS on loopback, in the run's domain."""
+    return {**os.environ, 'ROS_DOMAIN_ID': str(domain),
+            'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+            'RMW_IMPLEMENTATION': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')}
+
+
+def _die_with_parent() -> None:
+    libc = ctypes.CDLL('libc.so.6', use_errno=True)
+    libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+
+
+def check_supported(scenario: Scenario) -> None:
+    if str(scenario.controller.variant) not in IMPLEMENTED_VARIANTS:
+        raise BadInput(f'{scenario.path}: controller.variant: '
+                       f'{scenario.controller.variant!s} is not implemented yet '
+                       f'(available: {", ".join(IMPLEMENTED_VARIANTS)})')
+
+
+class Run:
+    """One run of a scenario: the graph, its supervision, its outputs."""
+
+    def __init__(self, scenario: Scenario, options: RunOptions) -> None:
+        self.scenario = scenario
+        self.options = options
+        self.out = options.out_dir
+        self.graph = build_graph(scenario, options.speed, str(self.out / 'run.mcap'))
+        ctrl = scenario.controller
+        self.monitor = MissionMonitor(MissionConfig(
+            goal=(float(scenario.goal[0]), float(scenario.goal[1])),
+            goal_tolerance=options.goal_tolerance, duration=scenario.duration,
+            robot_radius=scenario.robot_radius, dt=ctrl.dt,
+            stop_at_goal=str(ctrl.variant) != 'open_loop'), scenario.obstacles)
+        self.stop_requested: str | None = None
+        self.failed_node: dict | None = None
+        self.children: dict[str, subprocess.Popen] = {}
+
+    # -- lifecycle ----------------------------------------------------------------------
+    def execute(self) -> int:
+        (self.out / 'logs').mkdir(parents=True, exist_ok=True)
+        handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        wall_start = time.monotonic()
+        try:
+            with domain_id() as domain:
+                self.domain = domain
+                if self.options.mode == 'processes':
+                    self._run_processes(domain)
+                else:
+                    self._run_composed(domain)
+        finally:
+            for sig, handler in handlers.items():
+                signal.signal(sig, handler)
+        return self._write_summary(time.monotonic() - wall_start)
+
+    def _on_signal(self, signum: int, _frame) -> None:
+        self.stop_requested = signal.Signals(signum).name
+
+    def _spin(self, executor, check_children) -> None:
+        """Spin until the mission ends, a node fails, a signal arrives, or progress stalls."""
+        last_step, last_change = -1, time.monotonic()
+        self.first_step_wall: float | None = None
+        while self.monitor.outcome is Outcome.RUNNING:
+            executor.spin_once(timeout_sec=0.05)
+            now = time.monotonic()
+            if self.monitor.steps != last_step:
+                if self.first_step_wall is None and self.monitor.steps > 0:
+                    self.first_step_wall = now
+                last_step, last_change = self.monitor.steps, now
+            if self.stop_requested:
+                self.monitor.finish(Outcome.INTERRUPTED, f'stopped by {self.stop_requested}')
+            elif (failed := check_children()) is not None:
+                self.failed_node = failed
+                self.monitor.finish(Outcome.NODE_FAILED,
+                                    f"node '{failed['node']}' {failed['status']}")
+            else:
+                limit = (self.options.start_timeout_s if self.monitor.steps == 0
+                         else self.options.stall_timeout_s)
+                if now - last_change > limit:
+                    self.monitor.finish(Outcome.NODE_FAILED,
+                                        f'no new odometry for {limit:g} s of wall time '
+                                        f'(after {self.monitor.steps} steps): the graph stalled')
+        self.last_step_wall = time.monotonic()
+
+    # -- processes mode -------------------------------------------------------------------
+    def _run_processes(self, domain: int) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.signals import SignalHandlerOptions
+        from rrtq_bringup.supervisor import SupervisorNode
+
+        env = ros_env(domain)
+        params_dir = self.out / 'params'
+        params_dir.mkdir(exist_ok=True)
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE',)})
+        supervisor = SupervisorNode(self.monitor, self.scenario.goal, context=context)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(supervisor)
+        try:
+            for spec in self.graph:
+                if spec.name != 'supervisor':
+                    self.children[spec.name] = self._start_process(spec, params_dir, env)
+            self._spin(executor, self._check_children)
+        finally:
+            self._stop_processes()
+            executor.remove_node(supervisor)
+            supervisor.destroy_node()
+            context.try_shutdown()
+
+    def _start_process(self, spec: NodeSpec, params_dir: pathlib.Path,
+                       env: dict[str, str]) -> subprocess.Popen:
+        params_file = params_dir / f'{spec.name}.yaml'
+        params_file.write_text(yaml.safe_dump({spec.name: {'ros__parameters': spec.params}}))
+        log = open(self.out / 'logs' / f'{spec.name}.log', 'wb')  # noqa: SIM115
+        cmd = [sys.executable, '-m', spec.module, '--ros-args', '--params-file',
+               str(params_file)]
+        return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
+                                stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent,
+                                start_new_session=True)
+
+    def _check_children(self) -> dict | None:
+        for name, proc in self.children.items():
+            code = proc.poll()
+            if code is not None:
+                status = (f'was killed by {signal.Signals(-code).name}' if code < 0
+                          else f'exited with status {code}')
+                log = (self.out / 'logs' / f'{name}.log').read_text(errors='replace')
+                return {'node': name, 'status': status, 'exit_code': code,
+                        'log_tail': log.strip().splitlines()[-15:]}
+        return None
+
+    def _stop_processes(self) -> None:
+        """Stop the graph, the simulator first and the recorder last (it drains)."""
+        order = sorted(self.children, key=lambda n: (n == 'recorder', n != 'simulator'))
+        for name in order:
+            proc = self.children[name]
+            if proc.poll() is None:
+                if name == 'recorder':
+                    time.sleep(0.3)   # let the recorder take what is still in flight
+                proc.send_signal(signal.SIGINT)
+                try:
+                    proc.wait(timeout=10.0)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+
+    # -- composed mode --------------------------------------------------------------------
+    def _run_composed(self, domain: int) -> None:
+        import rclpy
+        from rclpy.executors import SingleThreadedExecutor
+        from rclpy.parameter import Parameter
+        from rclpy.signals import SignalHandlerOptions
+        from rrtq_bringup.supervisor import SupervisorNode
+
+        os.environ.update(ros_env(domain))
+        context = rclpy.Context()
+        rclpy.init(context=context, domain_id=domain,
+                   signal_handler_options=SignalHandlerOptions.NO)
+        executor = SingleThreadedExecutor(context=context)
+        nodes = [SupervisorNode(self.monitor, self.scenario.goal, context=context)]
+        try:
+            for spec in self.graph:
+                if spec.name == 'supervisor':
+                    continue
+                cls = getattr(importlib.import_module(spec.module), spec.cls)
+                overrides = [Parameter(k, value=v) for k, v in spec.params.items()]
+                nodes.append(cls(context=context, parameter_overrides=overrides))
+            for node in nodes:
+                executor.add_node(node)
+            self._spin(executor, lambda: None)
+        finally:
+            # Recorder last, after draining what is still queued for it.
+            for node in sorted(nodes, key=lambda n: n.get_name() == 'recorder'):
+                if node.get_name() == 'recorder':
+                    deadline = time.monotonic() + 0.3
+                    while time.monotonic() < deadline:
+                        executor.spin_once(timeout_sec=0.02)
+                executor.remove_node(node)
+                node.destroy_node()
+            context.try_shutdown()
+
+    # -- summary --------------------------------------------------------------------------
+    def _write_summary(self, wall_s: float) -> int:
+        summary = self.monitor.summary()
+        first = getattr(self, 'first_step_wall', None)
+        stepping_s = (self.last_step_wall - first) if first is not None else 0.0
+        summary.update({
+            'sim_speedup': (self.monitor.t / stepping_s) if stepping_s > 0 else None,
+            'wall_time_s': wall_s,
+            'scenario': self.scenario.path, 'name': self.scenario.name,
+            'seed': self.scenario.seed, 'mode': self.options.mode,
+            'speed': 'max' if self.options.speed == 0 else self.options.speed,
+            'ros_domain_id': getattr(self, 'domain', None),
+            'failed_node': self.failed_node,
+            'recording': str(self.out / 'run.mcap'),
+        })
+        if self.scenario.controller.variant == 'open_loop':
+            # A scripted plant test has no goal to reach: it succeeds when it runs its
+            # course without a collision.
+            summary['success'] = self.monitor.outcome is Outcome.DURATION
+        code = EXIT_SUCCESS if summary['success'] else EXIT_FAILED
+        summary['exit_code'] = code
+        (self.out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
+        return code

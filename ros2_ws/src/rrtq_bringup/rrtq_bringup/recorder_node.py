@@ -1,0 +1,102 @@
+"""Recorder node: every topic, discovered as it appears, into a rosbag2-style MCAP."""
+
+from __future__ import annotations
+
+import importlib
+import time
+
+from rclpy.duration import Duration
+from rclpy.node import Node
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
+                       ReliabilityPolicy)
+
+from rrtq_sim.params import declare, spin_node
+from rrtq_bringup.recording import INFINITE_DURATION, McapRecorder, QosOffer
+
+
+def message_class(type_name: str) -> type:
+    """``pkg/msg/Type`` -> the generated Python class."""
+    package, interface, name = type_name.split('/')
+    return getattr(importlib.import_module(f'{package}.{interface}'), name)
+
+
+def _duration(d: Duration) -> tuple[int, int]:
+    ns = d.nanoseconds
+    if ns >= INFINITE_DURATION[0] * 10**9 + INFINITE_DURATION[1] or ns < 0:
+        return INFINITE_DURATION
+    return divmod(ns, 10**9)
+
+
+def offer_of(qos: QoSProfile) -> QosOffer:
+    """A publisher's offered profile in rmw's policy names."""
+    return QosOffer(
+        history='keep_all' if qos.history == HistoryPolicy.KEEP_ALL else 'keep_last',
+        depth=qos.depth,
+        reliability=('best_effort' if qos.reliability == ReliabilityPolicy.BEST_EFFORT
+                     else 'reliable'),
+        durability=('transient_local' if qos.durability == DurabilityPolicy.TRANSIENT_LOCAL
+                    else 'volatile'),
+        deadline=_duration(qos.deadline), lifespan=_duration(qos.lifespan),
+        liveliness=('manual_by_topic' if qos.liveliness == LivelinessPolicy.MANUAL_BY_TOPIC
+                    else 'automatic'),
+        liveliness_lease_duration=_duration(qos.liveliness_lease_duration),
+        avoid_ros_namespace_conventions=qos.avoid_ros_namespace_conventions)
+
+
+def request_for(offers: list[QosOffer]) -> QoSProfile:
+    """The subscription profile that connects to every offer (rosbag2's adaptation)."""
+    reliable = bool(offers) and all(o.reliability == 'reliable' for o in offers)
+    latched = bool(offers) and all(o.durability == 'transient_local' for o in offers)
+    return QoSProfile(
+        history=HistoryPolicy.KEEP_LAST, depth=1000,
+        reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+        durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+
+
+class RecorderNode(Node):
+    """Subscribe raw to every topic that has a publisher and append it to ``output``."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('recorder', **kwargs)
+        output = declare(self, 'output', 'run.mcap', 'MCAP file to write')
+        period = declare(self, 'discovery_period_s', 0.05,
+                         'wall-clock period of the topic discovery poll, s', low=0.001)
+        flush = declare(self, 'flush_period_s', 1.0,
+                        'close a chunk at least this often (wall clock), s', low=0.01)
+        self.recorder = McapRecorder(output, flush_period_s=flush)
+        self._recorded: dict[str, object] = {}
+        self._timer = self.create_timer(period, self.discover)
+        self.discover()
+
+    def discover(self) -> None:
+        for topic, types in self.get_topic_names_and_types():
+            if topic in self._recorded or len(types) != 1:
+                continue
+            infos = self.get_publishers_info_by_topic(topic)
+            if not infos:
+                continue
+            offers = [offer_of(i.qos_profile) for i in infos]
+            type_name = types[0]
+            self.recorder.add_topic(topic, type_name, offers, str(infos[0].topic_type_hash))
+            self._recorded[topic] = self.create_subscription(
+                message_class(type_name), topic, self._callback_for(topic),
+                request_for(offers), raw=True)
+        self.recorder.tick(time.monotonic())
+
+    def _callback_for(self, topic: str):
+        def callback(data: bytes, info) -> None:
+            self.recorder.write(topic, data, info['received_timestamp'],
+                                info['source_timestamp'], time.monotonic())
+        return callback
+
+    def destroy_node(self) -> None:
+        self.recorder.finish()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> None:
+    spin_node(RecorderNode, args)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,51 @@
+"""Supervisor node: watches the run for the orchestrator and publishes the goal."""
+
+from __future__ import annotations
+
+import numpy as np
+from geometry_msgs.msg import PoseStamped, WrenchStamped
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from rrtq_msgs.msg import ControllerState, PlannerStats
+
+from rrtq_bringup.mission import MissionMonitor
+from rrtq_sim import conversions as conv
+from rrtq_sim import qos, topics
+
+
+class SupervisorNode(Node):
+    """Feeds the mission monitor from /odom, /cmd_force, /controller/state, /planner/stats."""
+
+    def __init__(self, monitor: MissionMonitor, goal: np.ndarray, **kwargs) -> None:
+        super().__init__('supervisor', **kwargs)
+        self.monitor = monitor
+        self.goal_pub = self.create_publisher(PoseStamped, topics.GOAL_POSE, qos.LATCHED)
+        goal_msg = PoseStamped()
+        goal_msg.header.frame_id = conv.MAP_FRAME
+        goal_msg.pose.position.x, goal_msg.pose.position.y = float(goal[0]), float(goal[1])
+        goal_msg.pose.orientation.w = 1.0
+        self.goal_pub.publish(goal_msg)
+        self.last_odom_ns = -1
+        self.create_subscription(Odometry, topics.ODOM, self.on_odom, qos.STREAM)
+        self.create_subscription(WrenchStamped, topics.CMD_FORCE, self.on_cmd, qos.STREAM)
+        self.create_subscription(ControllerState, topics.CONTROLLER_STATE, self.on_state,
+                                 qos.STREAM)
+        self.create_subscription(PlannerStats, topics.PLANNER_STATS, self.on_stats, qos.STREAM)
+
+    def on_odom(self, msg: Odometry) -> None:
+        stamp = conv.stamp_ns(msg.header.stamp)
+        if stamp <= self.last_odom_ns:
+            return
+        self.last_odom_ns = stamp
+        self.monitor.on_odometry(stamp * 1e-9, conv.odometry_state(msg)[:2])
+
+    def on_cmd(self, msg: WrenchStamped) -> None:
+        self.monitor.on_command(np.array([msg.wrench.force.x, msg.wrench.force.y]))
+
+    def on_state(self, msg: ControllerState) -> None:
+        self.monitor.controller_step_ms.append(msg.step_ms)
+
+    def on_stats(self, msg: PlannerStats) -> None:
+        if msg.replans > self.monitor.replans:
+            self.monitor.replans = msg.replans
+            self.monitor.replan_ms.append(msg.last_repair_ms)

@@ -1,0 +1,26 @@
+from setuptools import find_packages, setup
+
+package_name = 'rrtq_bringup'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test']),
+    package_data={package_name: ['py.typed']},
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=True,
+    maintainer='rrtq maintainers',
+    maintainer_email='maintainers@rrtq.dev',
+    description='Orchestrator, MCAP recorder and reports of the rrtq graph.',
+    license='MIT',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'recorder_node = rrtq_bringup.recorder_node:main',
+        ],
+    },
+)
