@@ -32,7 +32,7 @@ class DisturbanceNode(Node):
         f = np.asarray(d('F', [0.0, 0.0, -1.0, 1.0], 'F, row-major (n x q)', element=float))
         self.F = f.reshape(n, -1)
         amplitude = d('amplitude', 1.0, 'constant value / sinusoid amplitude / gaussian '
-                      'std / worst-case clip, in the units of d', low=0.0)
+                      'std / worst-case clip, in the units of d')
         frequency = d('frequency', 0.2, 'sinusoid frequency, Hz', low=0.0)
         seed = d('seed', 0, 'seed of the gaussian model', low=0)
         riccati = None

@@ -47,7 +47,7 @@ class SimulatorNode(Node):
         f = _matrix(d('F', [0.0] * n, 'disturbance matrix F, row-major (n x q)',
                       element=float), n, 'F')
         self.plant = Plant(a, b, f, dt, d('force_limit', 1000.0, 'saturation, N per axis',
-                                          low=0.0))
+                                          low=1e-6))
         self.anchor_mode = d('spring_anchor', 'leg_target', 'leg_target | world_origin')
         start = d('start', [0.0, 0.0], 'initial position (m); the robot starts at rest')
         self.speed = d('speed', 0.0, '0 = lock-step as fast as possible; > 0 = wall-clock '

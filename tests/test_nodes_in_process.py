@@ -1,0 +1,192 @@
+"""The simulator-side nodes on an in-process executor, driven by the test."""
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import WrenchStamped
+from nav_msgs.msg import Odometry
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rrtq_msgs.msg import ControllerState, Disturbance, ObstacleArray
+from scipy.integrate import solve_ivp
+from scipy.linalg import expm
+
+from rrtq_bringup.recorder_node import RecorderNode
+from rrtq_bringup.testing import Collector, spin_until, wait_for_messages
+from rrtq_sim import conversions as conv
+from rrtq_sim import qos
+from rrtq_sim.disturbance_node import DisturbanceNode
+from rrtq_sim.simulator_node import SimulatorNode
+from rrtq_sim.spawner_node import SpawnerNode
+
+M, K, C = 40.0, 20.0, 45.0
+A = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [-K / M, 0, -C / M, 0], [0, -K / M, 0, -C / M]])
+B = np.array([[0, 0], [0, 0], [1 / M, 0], [0, 1 / M]])
+F = np.array([[0.0], [0.0], [-1.0], [1.0]])
+
+
+def params(**kw):
+    return [Parameter(k, value=v) for k, v in kw.items()]
+
+
+def test_simulator_lockstep_matches_the_continuous_plant(ros):
+    context, executor, _ = ros
+    sim = SimulatorNode(context=context, parameter_overrides=params(
+        A=A.ravel().tolist(), B=B.ravel().tolist(), F=F.ravel().tolist(), dt=0.05,
+        start=[1.0, -2.0], spring_anchor='world_origin', acks=['cmd_force'],
+        wait_for=['/odom:1']))
+    driver = __import__('rclpy').create_node('driver', context=context)
+    executor.add_node(sim)
+    executor.add_node(driver)
+    force = (30.0, -12.0)
+    cmd_pub = driver.create_publisher(WrenchStamped, '/cmd_force', qos.STREAM)
+    odoms: list[Odometry] = []
+    hold = {'on': False}
+
+    def answer(msg):
+        odoms.append(msg)
+        if hold['on']:
+            return
+        cmd = WrenchStamped()
+        cmd.header.stamp = msg.header.stamp
+        cmd.wrench.force.x, cmd.wrench.force.y = force
+        cmd_pub.publish(cmd)
+    driver.create_subscription(Odometry, '/odom', answer, qos.STREAM)
+    assert spin_until(executor, lambda: len(odoms) >= 21, 20.0)
+    hold['on'] = True
+    count = len(odoms)
+    spin_until(executor, lambda: False, 0.5)
+    # Lock-step: without the acknowledgement of the last step, no step is taken.
+    assert len(odoms) == count + 1 or len(odoms) == count
+    stamps = [conv.stamp_ns(m.header.stamp) for m in odoms[:21]]
+    assert stamps == [k * 50_000_000 for k in range(21)]
+    sol = solve_ivp(lambda t, x: A @ x + B @ np.array(force), (0.0, 1.0),
+                    [1.0, -2.0, 0.0, 0.0], rtol=1e-11, atol=1e-12)
+    assert np.allclose(conv.odometry_state(odoms[20]), sol.y[:, -1], atol=1e-8)
+
+
+def test_simulator_rejects_non_finite_force(ros):
+    context, executor, _ = ros
+    sim = SimulatorNode(context=context, parameter_overrides=params(
+        A=A.ravel().tolist(), B=B.ravel().tolist(), F=F.ravel().tolist(), start=[0.0, 0.0],
+        acks=['cmd_force'], wait_for=['/odom:1']))
+    driver = __import__('rclpy').create_node('driver', context=context)
+    executor.add_node(sim)
+    executor.add_node(driver)
+    cmd_pub = driver.create_publisher(WrenchStamped, '/cmd_force', qos.STREAM)
+    odoms = []
+
+    def answer(msg):
+        odoms.append(msg)
+        cmd = WrenchStamped()
+        cmd.header.stamp = msg.header.stamp
+        cmd.wrench.force.x = float('nan')
+        cmd_pub.publish(cmd)
+    driver.create_subscription(Odometry, '/odom', answer, qos.STREAM)
+    assert spin_until(executor, lambda: len(odoms) >= 5, 20.0)
+    assert np.all(conv.odometry_state(odoms[4]) == 0.0)      # held at rest, no NaN
+    assert sim.rejected_inputs >= 4
+
+
+def test_spawner_perceives_along_a_scripted_path(ros, tmp_path):
+    context, executor, _ = ros
+    scenario = tmp_path / 's.yaml'
+    scenario.write_text("""
+bounds: {x: [-50, 50], y: [-50, 50]}
+start: [0.0, 0.0]
+goal: [40.0, 0.0]
+perception_radius: 3.0
+controller: {variant: open_loop, forces: [[0.0, 0.0, 0.0]]}
+obstacles:
+  - {id: ahead, polygon: [[10, 1], [11, 1], [11, 2], [10, 2]]}
+  - {id: mapped_but_gone, polygon: [[20, -2], [21, -2], [21, -1], [20, -1]], known: true, vanish_at: 0.0}
+  - {id: late, polygon: [[30, 1], [31, 1], [31, 2], [30, 2]], appear_at: 29.0}
+  - {id: far, polygon: [[20, 30], [21, 30], [21, 31], [20, 31]]}
+  - {id: map, polygon: [[-40, -40], [-39, -40], [-39, -39], [-40, -39]], known: true}
+""")
+    spawner = SpawnerNode(context=context, parameter_overrides=params(scenario=str(scenario)))
+    driver = __import__('rclpy').create_node('driver', context=context)
+    executor.add_node(spawner)
+    executor.add_node(driver)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    detected = Collector(driver, ObstacleArray, '/obstacles/detected', latched)
+    odom_pub = driver.create_publisher(Odometry, '/odom', qos.STREAM)
+    wait_for_messages(executor, detected, 1)
+    assert spin_until(executor, lambda: spawner.count_subscribers('/odom') and
+                      driver.count_subscribers('/odom') >= 1, 10.0)
+    # The robot moves along y = 0 at 1 m/s, one odometry message per second.
+    for t in range(0, 41):
+        odom_pub.publish(conv.odometry_msg(t * 10**9, np.array([float(t), 0.0, 1.0, 0.0])))
+    spin_until(executor, lambda: False, 1.0)
+    sets = [(round(conv.stamp_ns(m.header.stamp) * 1e-9), sorted(o.id for o in m.obstacles))
+            for m in detected.messages]
+    assert sets == [
+        (0, ['map', 'mapped_but_gone']),
+        (8, ['ahead', 'map', 'mapped_but_gone']),          # within 3 m of (10..11, 1..2)
+        (18, ['ahead', 'map']),                            # location seen empty
+        (29, ['ahead', 'late', 'map']),                    # appears while in range
+    ]
+
+
+def test_worst_case_disturbance_is_the_game_saddle_point(ros):
+    context, executor, _ = ros
+    gamma, T = 3.0, 10.0
+    Mw, Rw, PT = np.eye(4), 0.1 * np.eye(2), 0.5 * np.eye(4)
+    node = DisturbanceNode(context=context, parameter_overrides=params(
+        model='worst_case', F=F.ravel().tolist(), amplitude=100.0, gamma=gamma,
+        A=A.ravel().tolist(), B=B.ravel().tolist(), M=Mw.ravel().tolist(),
+        R=Rw.ravel().tolist(), P_T=PT.ravel().tolist(), horizon=T))
+    driver = __import__('rclpy').create_node('driver', context=context)
+    executor.add_node(node)
+    executor.add_node(driver)
+    out = Collector(driver, Disturbance, '/disturbance', qos.STREAM)
+    odom_pub = driver.create_publisher(Odometry, '/odom', qos.STREAM)
+    state_pub = driver.create_publisher(ControllerState, '/controller/state', qos.STREAM)
+    assert spin_until(executor, lambda: node.count_publishers('/odom') and
+                      node.count_publishers('/controller/state'), 10.0)
+    x = np.array([3.0, -1.0, 0.5, 0.2])
+    target = np.array([1.0, 1.0])
+    tau = 6.5
+    state = ControllerState(time_to_go=tau)
+    state.leg_target.x, state.leg_target.y = target
+    state.header.stamp = conv.time_msg(2 * 10**9)
+    state_pub.publish(state)                 # the join must wait for both, in any order
+    odom_pub.publish(conv.odometry_msg(2 * 10**9, x))
+    wait_for_messages(executor, out, 1)
+    # Independent game Riccati: dP/dtau = A'P + PA + M - P B R^-1 B' P + g^-2 P F F' P.
+    def rhs(_, p):
+        P = p.reshape(4, 4)
+        return (A.T @ P + P @ A + Mw - P @ B @ np.linalg.solve(Rw, B.T) @ P
+                + P @ F @ F.T @ P / gamma**2).ravel()
+    P = solve_ivp(rhs, (0.0, tau), PT.ravel(), rtol=1e-11, atol=1e-12).y[:, -1].reshape(4, 4)
+    xbar = x - np.array([*target, 0.0, 0.0])
+    expected = F.T @ P @ xbar / gamma**2
+    assert np.allclose(out.messages[0].value, expected, rtol=1e-6, atol=1e-9)
+    assert out.messages[0].model == 'worst_case'
+
+
+def test_recorder_gets_latched_messages_published_before_it_started(ros, tmp_path):
+    context, executor, _ = ros
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    talker = __import__('rclpy').create_node('talker', context=context)
+    executor.add_node(talker)
+    latched = talker.create_publisher(ObstacleArray, '/obstacles/detected', qos.LATCHED)
+    latched.publish(conv.obstacle_array_msg(7, [('a', np.array([[0, 0], [1, 0], [1, 1.0]]))]))
+    stream = talker.create_publisher(Odometry, '/odom', qos.STREAM)
+    recorder = RecorderNode(context=context, parameter_overrides=params(
+        output=str(tmp_path / 'r.mcap')))
+    executor.add_node(recorder)
+    assert spin_until(executor, lambda: recorder.recorder.has_topic('/odom') and
+                      stream.get_subscription_count() >= 1, 10.0)
+    for k in range(50):
+        stream.publish(conv.odometry_msg(k, np.array([k, 0.0, 0.0, 0.0])))
+    assert spin_until(executor, lambda: recorder.recorder.message_count >= 51, 10.0)
+    executor.remove_node(recorder)
+    recorder.destroy_node()
+    reader = make_reader(open(tmp_path / 'r.mcap', 'rb'), decoder_factories=[DecoderFactory()])
+    got = {}
+    for _, channel, _, decoded in reader.iter_decoded_messages():
+        got.setdefault(channel.topic, []).append(decoded)
+    assert [o.id for o in got['/obstacles/detected'][0].obstacles] == ['a']
+    assert [m.pose.pose.position.x for m in got['/odom']] == [float(k) for k in range(50)]
