@@ -148,3 +148,13 @@ def test_schema_text_is_rosbag2_layout(runs):
     assert array.startswith(msg('rrtq_msgs', 'ObstacleArray'))
     assert array.count('MSG: ') == len(set(array.split('MSG: ')[1:]))   # each dependency once
     assert 'MSG: rrtq_msgs/Obstacle\n' in array and 'MSG: geometry_msgs/Point32\n' in array
+
+
+def test_paced_mode_follows_the_wall_clock(tmp_path):
+    root = pathlib.Path(__file__).resolve().parents[1]
+    proc, out = run(root, tmp_path, 5, 'composed', extra=('--speed', '4.0'))
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['speed'] == 4.0 and summary['steps'] == 81
+    # Paced at 4x: never faster than the pace (slower only if the machine cannot keep up).
+    assert summary['sim_speedup'] <= 4.4

@@ -53,6 +53,9 @@ def request_for(offers: list[QosOffer]) -> QoSProfile:
         durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
 
 
+DRAIN_LIMIT = 1000
+
+
 class RecorderNode(Node):
     """Subscribe raw to every topic that has a publisher and append it to ``output``."""
 
@@ -85,9 +88,21 @@ class RecorderNode(Node):
 
     def _callback_for(self, topic: str):
         def callback(data: bytes, info) -> None:
-            self.recorder.write(topic, data, info['received_timestamp'],
-                                info['source_timestamp'], time.monotonic())
+            self._write(topic, data, info)
+            # Drain what else is queued on this topic now: one executor round trip per
+            # message would cap the recorder at a few thousand messages per second.
+            subscription = self._recorded[topic]
+            for _ in range(DRAIN_LIMIT):
+                with subscription.handle:
+                    taken = subscription.handle.take_message(subscription.msg_type, True)
+                if taken is None:
+                    break
+                self._write(topic, *taken)
         return callback
+
+    def _write(self, topic: str, data: bytes, info) -> None:
+        self.recorder.write(topic, data, info['received_timestamp'], info['source_timestamp'],
+                            time.monotonic())
 
     def destroy_node(self) -> None:
         self.recorder.finish()
