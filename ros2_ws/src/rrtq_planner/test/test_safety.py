@@ -1,0 +1,74 @@
+"""Safety core: D_rob against geometry done by hand, the augmentation against exact distances."""
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from rrtq_planner.safety import (SafetyConfig, SafetyMonitor, augment, clearance,
+                                 kinodynamic_distance)
+
+SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]])
+
+
+def test_kinodynamic_distance_is_the_distance_to_the_leg_line():
+    # Leg from (0, 0) to (10, 0): the deviation is |y|, wherever along the line.
+    assert kinodynamic_distance([0, 0], [10, 0], [3, 0.7]) == pytest.approx(0.7)
+    assert kinodynamic_distance([0, 0], [10, 0], [-4, -1.5]) == pytest.approx(1.5)
+    # A diagonal leg: the distance of (1, 0) from y = x is 1/sqrt(2).
+    assert kinodynamic_distance([0, 0, 5, 5], [4, 4, 0, 0], [1, 0, 9, 9]) == pytest.approx(
+        1 / math.sqrt(2))
+    # On the line: zero. Degenerate leg: distance from the target.
+    assert kinodynamic_distance([1, 1], [4, 5], [2.5, 3.0]) == pytest.approx(0.0, abs=1e-12)
+    assert kinodynamic_distance([2, 2], [2, 2], [5, 6]) == pytest.approx(5.0)
+
+
+@pytest.mark.parametrize('margin', [0.1, 0.5, 2.0])
+def test_augment_contains_the_minkowski_sum_and_is_tight(margin):
+    grown = shapely.Polygon(augment(SQUARE, margin))
+    original = shapely.Polygon(SQUARE)
+    # Every point at distance <= margin of the obstacle is inside (sampled on the exact
+    # boundary of the Minkowski sum: points at distance exactly `margin`).
+    rng = np.random.default_rng(0)
+    for angle in rng.uniform(0, 2 * math.pi, 400):
+        direction = np.array([math.cos(angle), math.sin(angle)])
+        # Walk out from the centre until the exact distance to the square is `margin`.
+        lo, hi = 0.0, 10.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            if original.distance(shapely.Point(np.array([1.0, 0.5]) + mid * direction)) < margin:
+                lo = mid
+            else:
+                hi = mid
+        point = shapely.Point(np.array([1.0, 0.5]) + lo * direction)
+        assert grown.covers(point)
+    # ... and nothing much more: the Hausdorff distance to the exact sum is below 1 %.
+    exact = original.buffer(margin, quad_segs=256)
+    assert grown.hausdorff_distance(exact) < 0.01 * margin + 1e-9
+
+
+def test_margin_zero_returns_the_obstacle():
+    assert np.array_equal(augment(SQUARE, 0.0), SQUARE)
+
+
+def test_monitor_keeps_the_running_maximum_and_republishes_on_growth():
+    monitor = SafetyMonitor(SafetyConfig(robot_radius=0.5, growth_threshold=0.1))
+    assert monitor.update([0, 0], [10, 0], [1, 0.2])            # nothing published yet
+    assert monitor.augmented([('a', SQUARE)])[0][0] == 'a'
+    assert monitor.margin == pytest.approx(0.7)
+    assert not monitor.update([0, 0], [10, 0], [2, 0.25])       # grew by 0.05 < 0.1
+    assert monitor.update([0, 0], [10, 0], [3, 0.31])           # grew by 0.11
+    assert monitor.update([0, 0], [10, 0], [3.5, 0.3])          # still owed a publication
+    monitor.augmented([('a', SQUARE)])
+    assert not monitor.update([0, 0], [10, 0], [4, 0.0])        # back on the line
+    assert monitor.d_rob == 0.0 and monitor.d_rob_max == pytest.approx(0.31)
+
+
+def test_clearance_signed_and_nearest():
+    far = SQUARE + np.array([10.0, 0.0])
+    value, index = clearance([3.0, 0.5], [far, SQUARE], robot_radius=0.25)
+    assert index == 1 and value == pytest.approx(0.75)
+    inside, _ = clearance([1.0, 0.4], [SQUARE], robot_radius=0.0)
+    assert inside == pytest.approx(-0.4)
+    assert clearance([0, 0], [], 1.0) == (math.inf, -1)
