@@ -172,3 +172,16 @@ def test_sigkill_of_everything_leaves_a_readable_recording(tmp_path):
         except Exception:              # the torn tail after the last complete chunk
             pass
     assert odom > 20
+
+
+@pytest.mark.parametrize('sig', [signal.SIGTERM, signal.SIGINT])
+def test_signal_stops_the_run_cleanly(tmp_path, sig):
+    proc, out, kids = start_paced_run(tmp_path)
+    proc.send_signal(sig)
+    proc.communicate(timeout=60)
+    assert proc.returncode == 1
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['outcome'] == 'interrupted' and sig.name in summary['reason']
+    assert wait_gone(kids) == []
+    reader = make_reader(open(out / 'run.mcap', 'rb'))
+    assert reader.get_summary().statistics.channel_message_counts
