@@ -32,7 +32,8 @@ obstacles:
 STEP_TOPICS = {'/clock': 'rosgraph_msgs/msg/Clock', '/odom': 'nav_msgs/msg/Odometry',
                '/cmd_force': 'geometry_msgs/msg/WrenchStamped',
                '/controller/state': 'rrtq_msgs/msg/ControllerState',
-               '/disturbance': 'rrtq_msgs/msg/Disturbance'}
+               '/disturbance': 'rrtq_msgs/msg/Disturbance',
+               '/perception/status': 'rrtq_msgs/msg/PerceptionStatus'}
 
 
 def run(root, tmp, seed, mode, extra=()):
@@ -86,12 +87,15 @@ def test_every_message_decodes_with_the_right_schema(runs):
     reader = make_reader(open(out / 'run.mcap', 'rb'), decoder_factories=[DecoderFactory()])
     counts = collections.Counter()
     types = {}
+    detections = []
     for schema, channel, message, decoded in reader.iter_decoded_messages():
         counts[channel.topic] += 1
         types[channel.topic] = schema.name
         assert channel.message_encoding == 'cdr' and schema.encoding == 'ros2msg'
         if channel.topic == '/odom':
             assert decoded.header.frame_id == 'map' and decoded.child_frame_id == 'base_link'
+        if channel.topic == '/perception/status' and decoded.detected:
+            detections.append((decoded.header.stamp.sec, list(decoded.detected)))
     for topic, type_name in STEP_TOPICS.items():
         assert types[topic] == type_name
         assert counts[topic] == 81, topic
@@ -99,6 +103,7 @@ def test_every_message_decodes_with_the_right_schema(runs):
     assert types['/goal_pose'] == 'geometry_msgs/msg/PoseStamped'
     # known_box at start; 'seen' when it appears inside the perception disc.
     assert counts['/obstacles/detected'] == 2
+    assert len(detections) == 1 and detections[0][1] == ['seen'] and detections[0][0] >= 1
     summary = reader.get_summary()
     assert summary.statistics.message_count == sum(counts.values())
     assert all(c.compression == 'zstd' for c in summary.chunk_indexes)

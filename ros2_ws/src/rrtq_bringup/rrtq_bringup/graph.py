@@ -26,7 +26,8 @@ class NodeSpec:
     subscribes: tuple[str, ...] = ()   # per-step topics it reads (start-up gate)
 
 
-STEP_TOPICS = ('/clock', '/odom', '/cmd_force', '/controller/state', '/disturbance')
+STEP_TOPICS = ('/clock', '/odom', '/cmd_force', '/controller/state', '/disturbance',
+               '/perception/status')
 
 
 def _flat(a: np.ndarray) -> list[float]:

@@ -15,7 +15,7 @@ from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from nav_msgs.msg import Odometry
-from rrtq_msgs.msg import ControllerState, Disturbance
+from rrtq_msgs.msg import ControllerState, Disturbance, PerceptionStatus
 
 from rrtq_sim import conversions as conv
 from rrtq_sim import qos, topics
@@ -25,7 +25,8 @@ from rrtq_sim.plant import Plant
 
 ACK_TOPICS = {'cmd_force': (topics.CMD_FORCE, WrenchStamped),
               'controller_state': (topics.CONTROLLER_STATE, ControllerState),
-              'disturbance': (topics.DISTURBANCE, Disturbance)}
+              'disturbance': (topics.DISTURBANCE, Disturbance),
+              'perception_status': (topics.PERCEPTION_STATUS, PerceptionStatus)}
 
 
 def _matrix(flat: list[float], rows: int, name: str) -> np.ndarray:
@@ -76,7 +77,8 @@ class SimulatorNode(Node):
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK, qos.CLOCK)
         self.odom_pub = self.create_publisher(Odometry, topics.ODOM, qos.STREAM)
         self.join = StampJoin(self.acks)
-        for key, (topic, mtype) in ACK_TOPICS.items():
+        for key in sorted(set(self.acks) | {'cmd_force', 'controller_state', 'disturbance'}):
+            topic, mtype = ACK_TOPICS[key]
             self.create_subscription(mtype, topic, self._input_callback(key), qos.STREAM)
         self._gate = self.create_timer(0.02, self._try_start)
 

@@ -2,7 +2,9 @@
 
 On every /odom step the perception core compares truth with the robot's map inside
 the perception disc; whenever the map changes, the whole known set is published on
-/obstacles/detected (latched, so late joiners get the current map).
+/obstacles/detected (latched, so late joiners get the current map). Every step ends
+with /perception/status, which names the stamp of the latest map: a lock-step reader
+that sees it equal to the step's stamp knows to wait for that map.
 """
 
 from __future__ import annotations
@@ -10,12 +12,13 @@ from __future__ import annotations
 import numpy as np
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rrtq_msgs.msg import ObstacleArray
+from rrtq_msgs.msg import ObstacleArray, PerceptionStatus
 
 from rrtq_sim import conversions as conv
 from rrtq_sim import qos, topics
 from rrtq_sim.params import declare, spin_node
-from rrtq_sim.perception import Perception
+from rrtq_sim.perception import ObstacleEvent, Perception
+from rrtq_sim.obstacles import disc_intersects_polygon
 from rrtq_sim.scenario import load_scenario
 
 
@@ -29,25 +32,41 @@ class SpawnerNode(Node):
         self.specs = {spec.id: spec for spec in scenario.obstacles}
         self.perception = Perception(scenario.obstacles, scenario.perception_radius)
         self.pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_DETECTED, qos.LATCHED)
+        self.status_pub = self.create_publisher(PerceptionStatus, topics.PERCEPTION_STATUS,
+                                                qos.STREAM)
         self.last_stamp = -1
+        self.detected_stamp = 0
         self.create_subscription(Odometry, topics.ODOM, self.on_odom, qos.STREAM)
         self.publish(0)
 
     def on_odom(self, msg: Odometry) -> None:
         stamp = conv.stamp_ns(msg.header.stamp)
         if stamp <= self.last_stamp:
+            self.status_pub.publish(self.status)   # a resent step: answer it again
             return
         self.last_stamp = stamp
-        events = self.perception.step(conv.odometry_state(msg)[:2], stamp * 1e-9)
+        position = conv.odometry_state(msg)[:2]
+        t = stamp * 1e-9
+        events = self.perception.step(position, t)
         for event, oid in events:
-            self.get_logger().info(f't={stamp * 1e-9:.2f} s: obstacle {oid} {event.value}')
+            self.get_logger().info(f't={t:.2f} s: obstacle {oid} {event.value}')
         if events:
             self.publish(stamp)
+        in_range = sum(1 for spec in self.specs.values() if self.perception.exists(spec, t)
+                       and disc_intersects_polygon(position, self.perception.radius,
+                                                   spec.polygon))
+        self.status = PerceptionStatus(
+            header=msg.header, detected_stamp=conv.time_msg(self.detected_stamp),
+            known=len(self.perception.known_ids), in_range=in_range,
+            detected=[oid for e, oid in events if e is ObstacleEvent.DETECTED],
+            removed=[oid for e, oid in events if e is ObstacleEvent.REMOVED])
+        self.status_pub.publish(self.status)
 
     def publish(self, stamp: int) -> None:
         known = [(oid, self.specs[oid].polygon) for oid in self.specs
                  if oid in self.perception.known_ids]
         self.pub.publish(conv.obstacle_array_msg(stamp, known))
+        self.detected_stamp = stamp
 
 
 def main(args: list[str] | None = None) -> None:
