@@ -103,6 +103,8 @@ def test_every_message_decodes_with_the_right_schema(runs):
     assert types['/goal_pose'] == 'geometry_msgs/msg/PoseStamped'
     # known_box at start; 'seen' when it appears inside the perception disc.
     assert counts['/obstacles/detected'] == 2
+    # Truth: known_box from the start, 'seen' from t = 1 s.
+    assert counts['/obstacles/truth'] == 2
     assert len(detections) == 1 and detections[0][1] == ['seen'] and detections[0][0] >= 1
     summary = reader.get_summary()
     assert summary.statistics.message_count == sum(counts.values())

@@ -5,6 +5,10 @@ the perception disc; whenever the map changes, the whole known set is published 
 /obstacles/detected (latched, so late joiners get the current map). Every step ends
 with /perception/status, which names the stamp of the latest map: a lock-step reader
 that sees it equal to the step's stamp knows to wait for that map.
+
+The ground truth (the obstacles that physically exist) goes on /obstacles/truth, latched,
+whenever it changes: no node of the robot reads it; it is there so that a recording
+can be judged and plotted against the truth alone.
 """
 
 from __future__ import annotations
@@ -34,10 +38,14 @@ class SpawnerNode(Node):
         self.pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_DETECTED, qos.LATCHED)
         self.status_pub = self.create_publisher(PerceptionStatus, topics.PERCEPTION_STATUS,
                                                 qos.STREAM)
+        self.truth_pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_TRUTH,
+                                               qos.LATCHED)
         self.last_stamp = -1
         self.detected_stamp = 0
+        self.existing: list[str] | None = None
         self.create_subscription(Odometry, topics.ODOM, self.on_odom, qos.STREAM)
         self.publish(0)
+        self.publish_truth(0)
 
     def on_odom(self, msg: Odometry) -> None:
         stamp = conv.stamp_ns(msg.header.stamp)
@@ -52,6 +60,7 @@ class SpawnerNode(Node):
             self.get_logger().info(f't={t:.2f} s: obstacle {oid} {event.value}')
         if events:
             self.publish(stamp)
+        self.publish_truth(stamp)
         in_range = sum(1 for spec in self.specs.values() if self.perception.exists(spec, t)
                        and disc_intersects_polygon(position, self.perception.radius,
                                                    spec.polygon))
@@ -61,6 +70,14 @@ class SpawnerNode(Node):
             detected=[oid for e, oid in events if e is ObstacleEvent.DETECTED],
             removed=[oid for e, oid in events if e is ObstacleEvent.REMOVED])
         self.status_pub.publish(self.status)
+
+    def publish_truth(self, stamp: int) -> None:
+        existing = [oid for oid, spec in self.specs.items()
+                    if self.perception.exists(spec, stamp * 1e-9)]
+        if existing != self.existing:
+            self.existing = existing
+            self.truth_pub.publish(conv.obstacle_array_msg(
+                stamp, [(oid, self.specs[oid].polygon) for oid in existing]))
 
     def publish(self, stamp: int) -> None:
         known = [(oid, self.specs[oid].polygon) for oid in self.specs
