@@ -12,6 +12,7 @@ test: setup
 
 demo: setup
 	@$(ENV) scripts/rrtq run scenarios/plant_only.yaml --out runs/plant-only --overwrite
+	@$(ENV) scripts/rrtq report runs/plant-only/run.mcap
 
 bench: setup
 	@$(ENV) python benchmarks/run_all.py

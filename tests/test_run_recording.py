@@ -165,3 +165,17 @@ def test_paced_mode_follows_the_wall_clock(tmp_path):
     assert summary['speed'] == 4.0 and summary['steps'] == 81
     # Paced at 4x: never faster than the pace (slower only if the machine cannot keep up).
     assert summary['sim_speedup'] <= 4.4
+
+
+def test_report_from_the_recording_agrees_with_the_live_summary(runs, tmp_path):
+    from rrtq_bringup.report import report
+    _, out = runs[(3, 'processes')]
+    live = json.loads((out / 'summary.json').read_text())
+    offline = report(out / 'run.mcap', tmp_path / 'report')
+    assert offline['steps'] == live['steps']
+    assert offline['path_length_m'] == pytest.approx(live['path_length_m'], rel=1e-12)
+    assert offline['min_clearance_m'] == pytest.approx(live['min_clearance_m'], rel=1e-9)
+    assert offline['control_effort'] == pytest.approx(live['control_effort'], rel=1e-9)
+    assert offline['collided'] is False
+    for name in ('map.png', 'timeseries.png'):
+        assert (tmp_path / 'report' / name).stat().st_size > 10_000

@@ -40,6 +40,10 @@ def _parser() -> argparse.ArgumentParser:
                      help='one process per node (default) or all nodes on one executor')
     run.add_argument('--overwrite', action='store_true',
                      help='replace an existing recording in the output directory')
+    rep = sub.add_parser('report', help='figures and summary from a recording alone')
+    rep.add_argument('recording', type=pathlib.Path, help='run.mcap of a run')
+    rep.add_argument('--out', type=pathlib.Path,
+                     help='output directory (default: report/ beside the recording)')
     return parser
 
 
@@ -74,11 +78,28 @@ def cmd_run(args: argparse.Namespace) -> int:
     return code
 
 
+def cmd_report(args: argparse.Namespace) -> int:
+    if not args.recording.is_file():
+        print(f'rrtq: error: {args.recording}: no such recording', file=sys.stderr)
+        return EXIT_BAD_INPUT
+    from mcap.exceptions import McapError
+    from rrtq_bringup.report import report
+    try:
+        summary = report(args.recording, args.out)
+    except (McapError, ValueError) as exc:
+        print(f'rrtq: error: {args.recording}: not a readable recording ({exc})',
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
+    out = args.out or args.recording.parent / 'report'
+    print(json.dumps({k: summary[k] for k in ('sim_time_s', 'path_length_m', 'min_clearance_m',
+                                               'collided', 'time_to_goal_s')}))
+    print(f'rrtq: figures in {out}', file=sys.stderr)
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
-    if args.command == 'run':
-        return cmd_run(args)
-    return EXIT_BAD_INPUT
+    return {'run': cmd_run, 'report': cmd_report}[args.command](args)
 
 
 if __name__ == '__main__':

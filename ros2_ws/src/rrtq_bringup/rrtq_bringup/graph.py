@@ -58,7 +58,7 @@ def build_graph(scenario: Scenario, speed: float, output: str) -> list[NodeSpec]
     spawner = NodeSpec('obstacle_spawner', 'rrtq_sim.spawner_node', 'SpawnerNode', {
         **sim_time, 'scenario': scenario.path}, subscribes=('/clock', '/odom'))
     recorder = NodeSpec('recorder', 'rrtq_bringup.recorder_node', 'RecorderNode', {
-        'output': output}, subscribes=STEP_TOPICS)
+        'output': output, 'scenario': scenario.path}, subscribes=STEP_TOPICS)
     supervisor = NodeSpec('supervisor', 'rrtq_bringup.supervisor', 'SupervisorNode', {},
                           subscribes=('/odom', '/cmd_force', '/controller/state'))
     others = [recorder, supervisor, controller, disturbance, spawner]

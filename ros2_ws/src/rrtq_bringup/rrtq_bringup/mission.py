@@ -61,7 +61,7 @@ class MissionMonitor:
         self.steps = 0
         self.position: np.ndarray | None = None
         self.path_length = 0.0
-        self.control_effort = 0.0
+        self.commands: dict[float, float] = {}
         self.min_clearance = math.inf
         self.time_to_goal: float | None = None
         self.collided = False
@@ -102,10 +102,21 @@ class MissionMonitor:
             self.finish(Outcome.DURATION, f'duration {self.config.duration:g} s elapsed')
         return self.outcome
 
-    def on_command(self, u: np.ndarray) -> None:
-        """Account one step of commanded force (effort = sum of |u|^2 dt, N^2 s)."""
-        if self.outcome is Outcome.RUNNING:
-            self.control_effort += float(np.dot(u, u)) * self.config.dt
+    def on_command(self, t: float, u: np.ndarray) -> None:
+        """Record the command of the step at ``t`` (a repeat of a step replaces it)."""
+        self.commands[round(t, 9)] = float(np.dot(u, u))
+
+    def commands_complete(self) -> bool:
+        """True when a command is held for every step before the last (or none at all)."""
+        if not self.commands:
+            return True
+        applied = sum(1 for t in self.commands if t < self.t - 1e-9)
+        return applied >= self.steps - 1
+
+    @property
+    def control_effort(self) -> float:
+        """Sum of |u|^2 dt (N^2 s) over the commands applied: those before the last step."""
+        return sum(v for t, v in self.commands.items() if t < self.t - 1e-9) * self.config.dt
 
     def finish(self, outcome: Outcome, reason: str) -> None:
         if self.outcome is Outcome.RUNNING:
@@ -129,6 +140,7 @@ class MissionMonitor:
             'steps': self.steps,
             'path_length_m': self.path_length,
             'control_effort': self.control_effort,
+            'commands': len(self.commands),
             'min_clearance_m': None if math.isinf(self.min_clearance) else self.min_clearance,
             'replans': self.replans,
             'replan_ms': _percentiles(self.replan_ms, (50, 95, 100)),

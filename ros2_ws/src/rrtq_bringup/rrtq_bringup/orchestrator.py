@@ -128,7 +128,7 @@ class Run:
     def _on_signal(self, signum: int, _frame) -> None:
         self.stop_requested = signal.Signals(signum).name
 
-    def _spin(self, executor, check_children) -> None:
+    def _spin(self, executor, check_children, halt_simulator) -> None:
         """Spin until the mission ends, a node fails, a signal arrives, or progress stalls."""
         last_step, last_change = -1, time.monotonic()
         self.first_step_wall: float | None = None
@@ -153,6 +153,12 @@ class Run:
                                         f'no new odometry for {limit:g} s of wall time '
                                         f'(after {self.monitor.steps} steps): the graph stalled')
         self.last_step_wall = time.monotonic()
+        halt_simulator()
+        # Take what is still in flight for the supervisor: the commands of the last steps
+        # may arrive after the odometry that ended the run.
+        deadline = time.monotonic() + 2.0
+        while not self.monitor.commands_complete() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.02)
 
     # -- processes mode -------------------------------------------------------------------
     def _run_processes(self, domain: int) -> None:
@@ -175,7 +181,7 @@ class Run:
             for spec in self.graph:
                 if spec.name != 'supervisor':
                     self.children[spec.name] = self._start_process(spec, params_dir, env)
-            self._spin(executor, self._check_children)
+            self._spin(executor, self._check_children, self._halt_simulator_process)
         finally:
             self._stop_processes()
             executor.remove_node(supervisor)
@@ -192,6 +198,16 @@ class Run:
         return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent,
                                 start_new_session=True)
+
+    def _halt_simulator_process(self) -> None:
+        """Stop stepping at once: the recording ends where the mission ended."""
+        sim = self.children.get('simulator')
+        if sim is not None and sim.poll() is None:
+            sim.send_signal(signal.SIGINT)
+            try:
+                sim.wait(timeout=10.0)
+            except subprocess.TimeoutExpired:
+                sim.kill()
 
     def _check_children(self) -> dict | None:
         for name, proc in self.children.items():
@@ -242,7 +258,8 @@ class Run:
                 nodes.append(cls(context=context, parameter_overrides=overrides))
             for node in nodes:
                 executor.add_node(node)
-            self._spin(executor, lambda: None)
+            simulator = next(n for n in nodes if n.get_name() == 'simulator')
+            self._spin(executor, lambda: None, lambda: executor.remove_node(simulator))
         finally:
             # Recorder last, after draining what is still queued for it.
             for node in sorted(nodes, key=lambda n: n.get_name() == 'recorder'):
@@ -250,7 +267,8 @@ class Run:
                     deadline = time.monotonic() + 0.3
                     while time.monotonic() < deadline:
                         executor.spin_once(timeout_sec=0.02)
-                executor.remove_node(node)
+                if node in executor.get_nodes():
+                    executor.remove_node(node)
                 node.destroy_node()
             context.try_shutdown()
 

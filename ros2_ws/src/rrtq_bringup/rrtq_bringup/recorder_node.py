@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import pathlib
 import time
 
 from rclpy.duration import Duration
@@ -12,6 +13,8 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSPro
 
 from rrtq_sim.params import declare, spin_node
 from rrtq_bringup.recording import INFINITE_DURATION, McapRecorder, QosOffer
+
+SCENARIO_METADATA = 'rrtq_scenario'
 
 
 def message_class(type_name: str) -> type:
@@ -66,7 +69,12 @@ class RecorderNode(Node):
                          'wall-clock period of the topic discovery poll, s', low=0.001)
         flush = declare(self, 'flush_period_s', 1.0,
                         'close a chunk at least this often (wall clock), s', low=0.01)
+        scenario = declare(self, 'scenario', '', 'scenario file to embed in the recording as '
+                           f'MCAP metadata "{SCENARIO_METADATA}" (empty: none)')
         self.recorder = McapRecorder(output, flush_period_s=flush)
+        if scenario:
+            self.recorder.add_metadata(SCENARIO_METADATA, {
+                'path': scenario, 'yaml': pathlib.Path(scenario).read_text()})
         self._recorded: dict[str, object] = {}
         self._timer = self.create_timer(period, self.discover)
         self.discover()

@@ -196,6 +196,10 @@ class McapRecorder:
         self._sequence[channel_id] = 0
         return channel_id
 
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """A named MCAP metadata record (string to string map)."""
+        self._writer.add_metadata(name, data)
+
     def has_topic(self, topic: str) -> bool:
         return topic in self._channels
 

@@ -40,7 +40,8 @@ class SupervisorNode(Node):
         self.monitor.on_odometry(stamp * 1e-9, conv.odometry_state(msg)[:2])
 
     def on_cmd(self, msg: WrenchStamped) -> None:
-        self.monitor.on_command(np.array([msg.wrench.force.x, msg.wrench.force.y]))
+        self.monitor.on_command(conv.stamp_ns(msg.header.stamp) * 1e-9,
+                                np.array([msg.wrench.force.x, msg.wrench.force.y]))
 
     def on_state(self, msg: ControllerState) -> None:
         self.monitor.controller_step_ms.append(msg.step_ms)

@@ -1,0 +1,203 @@
+"""`rrtq report RUN.mcap`: figures and a summary computed from the recording alone.
+
+- ``map.png`` in the manner of RRT-QX Fig. 2: true obstacles (those that vanished
+  hatched), the detected and the augmented obstacles, the RRT^X tree and the last path,
+  the traversed path, the perception disc along it, the leg targets;
+- ``timeseries.png``: forces, speed and distance to goal, disturbance, D_rob and its
+  maximum, the learned weights (each panel only when its topics were recorded);
+- ``summary.json``: path length, control effort, clearance against the true obstacles,
+  time to goal, legs — from the recorded messages and the scenario embedded in the file.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import pathlib
+
+import matplotlib
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+from matplotlib.patches import Circle, Polygon as PolygonPatch  # noqa: E402
+from mcap.reader import make_reader  # noqa: E402
+
+from rrtq_bringup.recorder_node import SCENARIO_METADATA  # noqa: E402
+from rrtq_bringup.run_data import RunData, read_run  # noqa: E402
+from rrtq_sim.obstacles import point_polygon_distance  # noqa: E402
+
+
+
+def embedded_scenario(path: str | pathlib.Path) -> dict:
+    """The scenario YAML the recorder embedded as MCAP metadata ({} if absent)."""
+    with open(path, 'rb') as f:
+        for record in make_reader(f).iter_metadata():
+            if record.name == SCENARIO_METADATA:
+                return yaml.safe_load(record.metadata['yaml']) or {}
+    return {}
+
+
+def _existence(data: RunData) -> dict[str, tuple[np.ndarray, float, float]]:
+    """Every true obstacle ever published: polygon, first and last time it existed."""
+    seen: dict[str, tuple[np.ndarray, float, float]] = {}
+    end = float(data.odom_t[-1]) if data.odom_t.size else 0.0
+    sets = data.truth + [(math.inf, [])]
+    for (t, obstacles), (t_next, _) in zip(sets, sets[1:]):
+        for oid, poly in obstacles:
+            first = seen[oid][1] if oid in seen else t
+            seen[oid] = (poly, first, min(t_next, end))
+    return seen
+
+
+def true_clearance(data: RunData, robot_radius: float) -> np.ndarray:
+    """Per odometry sample: distance from the robot's disc to the nearest true obstacle."""
+    out = np.full(data.odom_t.size, math.inf)
+    sets = data.truth + [(math.inf, [])]
+    for (t, obstacles), (t_next, _) in zip(sets, sets[1:]):
+        mask = (data.odom_t >= t - 1e-9) & (data.odom_t < t_next - 1e-9)
+        for _, poly in obstacles:
+            if mask.any():
+                out[mask] = np.minimum(out[mask],
+                                       point_polygon_distance(data.odom_x[mask, :2], poly))
+    return out - robot_radius
+
+
+def summarise(data: RunData, scenario: dict, goal_tolerance: float = 0.5) -> dict:
+    """The run's summary from its recording."""
+    robot_radius = float(scenario.get('robot_radius', 0.0))
+    positions = data.odom_x[:, :2]
+    clearance = true_clearance(data, robot_radius)
+    goal = data.goal if data.goal is not None else np.asarray(scenario.get('goal', [np.nan] * 2))
+    reached = np.flatnonzero(np.linalg.norm(positions - goal, axis=1) <= goal_tolerance)
+    dt = float(np.median(np.diff(data.cmd_t))) if data.cmd_t.size > 1 else 0.0
+    collided = bool(clearance.size and clearance.min() < 0.0)
+    # Effort counts the commands the plant applied: those before the last step.
+    applied = data.cmd_t < (data.odom_t[-1] - 1e-9 if data.odom_t.size else -np.inf)
+    return {
+        'sim_time_s': float(data.odom_t[-1]) if data.odom_t.size else 0.0,
+        'steps': int(data.odom_t.size),
+        'path_length_m': float(np.linalg.norm(np.diff(positions, axis=0), axis=1).sum()),
+        'control_effort': float((data.cmd_u[applied] ** 2).sum() * dt),
+        'min_clearance_m': float(clearance.min()) if np.isfinite(clearance).any() else None,
+        'collided': collided,
+        'time_to_goal_s': float(data.odom_t[reached[0]]) if reached.size else None,
+        'legs': int(data.leg_index.max()) + 1 if data.leg_index.size else 0,
+        'max_d_rob_m': float(data.d_rob_max.max()) if data.d_rob_max.size else None,
+        'topics': data.topics,
+    }
+
+
+def plot_map(data: RunData, scenario: dict, path: pathlib.Path) -> None:
+    fig, ax = plt.subplots(figsize=(8, 8))
+    bounds = scenario.get('bounds')
+    for oid, (poly, first, last) in _existence(data).items():
+        vanished = data.odom_t.size and last < data.odom_t[-1] - 1e-9
+        ax.add_patch(PolygonPatch(poly, closed=True, facecolor='none' if vanished else '0.35',
+                                  edgecolor='0.2', hatch='//' if vanished else None, lw=1.0,
+                                  zorder=2))
+    believed = {oid: poly for _, obstacles in data.detected for oid, poly in obstacles}
+    for oid, poly in believed.items():
+        if oid not in _existence(data):      # mapped, but never there
+            ax.add_patch(PolygonPatch(poly, closed=True, fill=False, ec='tab:red', ls=':',
+                                      lw=1.0, zorder=2))
+    if data.augmented:
+        for _, poly in data.augmented[-1][1]:
+            ax.add_patch(PolygonPatch(poly, closed=True, fill=False, ls='--', ec='tab:orange',
+                                      lw=1.0, zorder=2))
+    if data.detected:
+        for _, poly in data.detected[-1][1]:
+            ax.add_patch(PolygonPatch(poly, closed=True, fill=False, ec='tab:red', lw=1.2,
+                                      zorder=3))
+    if data.tree_segments is not None and len(data.tree_segments):
+        from matplotlib.collections import LineCollection
+        ax.add_collection(LineCollection(data.tree_segments, colors='0.8', lw=0.4, zorder=1))
+    if data.plans:
+        plan = data.plans[-1][1]
+        ax.plot(plan[:, 0], plan[:, 1], '-', color='tab:green', lw=1.5, label='last RRT^X path')
+    xy = data.odom_x[:, :2]
+    if xy.size:
+        ax.plot(xy[:, 0], xy[:, 1], '-', color='tab:blue', lw=1.8, label='traversed path',
+                zorder=4)
+        radius = float(scenario.get('perception_radius', 0.0))
+        if radius > 0:
+            for k in np.linspace(0, len(xy) - 1, 6).astype(int):
+                ax.add_patch(Circle(xy[k], radius, fill=False, ec='tab:blue', alpha=0.25,
+                                    ls=':'))
+        ax.plot(*xy[0], 'o', color='tab:blue', ms=8, label='start')
+    if data.leg_target.size:
+        targets = np.unique(data.leg_target, axis=0)
+        ax.plot(targets[:, 0], targets[:, 1], 'x', color='k', ms=6, label='leg targets')
+    if data.goal is not None:
+        ax.plot(*data.goal, '*', color='gold', mec='k', ms=16, label='goal', zorder=5)
+    if bounds:
+        ax.set_xlim(bounds['x'])
+        ax.set_ylim(bounds['y'])
+    ax.set_aspect('equal')
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(f"{scenario.get('name', '')}: grey true obstacles (hatched: vanished), red "
+                 'detected (dotted: mapped but absent), orange augmented', fontsize=9)
+    ax.legend(loc='best', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def plot_timeseries(data: RunData, scenario: dict, path: pathlib.Path) -> None:
+    panels = ['forces', 'motion']
+    if data.dist_t.size and np.any(data.dist_d):
+        panels.append('disturbance')
+    if data.safety_t.size:
+        panels.append('safety')
+    if any(w.size for w in data.critic_w):
+        panels.append('weights')
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 2.3 * len(panels)), sharex=True)
+    axes = np.atleast_1d(axes)
+    for ax, panel in zip(axes, panels):
+        if panel == 'forces':
+            ax.plot(data.cmd_t, data.cmd_u[:, 0], label='$f_x$')
+            ax.plot(data.cmd_t, data.cmd_u[:, 1], label='$f_y$')
+            ax.set_ylabel('force [N]')
+        elif panel == 'motion':
+            ax.plot(data.odom_t, np.linalg.norm(data.odom_x[:, 2:], axis=1), label='speed [m/s]')
+            if data.goal is not None:
+                ax.plot(data.odom_t, np.linalg.norm(data.odom_x[:, :2] - data.goal, axis=1),
+                        label='distance to goal [m]')
+            if data.d.size:
+                ax.plot(data.state_t, data.d, label='D (leg) ')
+        elif panel == 'disturbance':
+            for j in range(data.dist_d.shape[1]):
+                ax.plot(data.dist_t, data.dist_d[:, j], label=f'$d_{j + 1}$')
+            ax.set_ylabel('disturbance')
+        elif panel == 'safety':
+            ax.plot(data.safety_t, data.d_rob, label='$D_{rob}$')
+            ax.plot(data.safety_t, data.d_rob_max, label='max $D_{rob}$')
+            ax.set_ylabel('m')
+        elif panel == 'weights':
+            for name, ws in (('critic', data.critic_w), ('actor', data.actor_w),
+                             ('disturbance actor', data.disturbance_w)):
+                if any(w.size for w in ws):
+                    ax.plot(data.state_t, [np.linalg.norm(w) for w in ws], label=f'|W| {name}')
+            ax.set_ylabel('weight norm')
+        ax.legend(loc='upper right', fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel('sim time [s]')
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = None) -> dict:
+    """Write the figures and summary for ``recording``; return the summary."""
+    recording = pathlib.Path(recording)
+    out = pathlib.Path(out_dir) if out_dir else recording.parent / 'report'
+    out.mkdir(parents=True, exist_ok=True)
+    data = read_run(recording)
+    scenario = embedded_scenario(recording)
+    summary = summarise(data, scenario)
+    plot_map(data, scenario, out / 'map.png')
+    plot_timeseries(data, scenario, out / 'timeseries.png')
+    (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
+    return summary

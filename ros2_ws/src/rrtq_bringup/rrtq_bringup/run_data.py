@@ -1,0 +1,126 @@
+"""A run's recording as numpy series: everything the report needs, from the MCAP alone.
+
+Decoding uses ``mcap_ros2``'s decoder (the schema text in the file, not the installed
+message packages), so a recording can be read on a machine without this workspace.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import pathlib
+
+import numpy as np
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+
+def _stamp(header) -> float:
+    return header.stamp.sec + header.stamp.nanosec * 1e-9
+
+
+def _polygons(msg) -> list[tuple[str, np.ndarray]]:
+    return [(o.id, np.array([[p.x, p.y] for p in o.polygon.points]).reshape(-1, 2))
+            for o in msg.obstacles]
+
+
+@dataclasses.dataclass
+class RunData:
+    """Time series and snapshots of one run (times in s of sim time)."""
+
+    odom_t: np.ndarray                 # (N,)
+    odom_x: np.ndarray                 # (N, 4): p_x, p_y, v_x, v_y
+    cmd_t: np.ndarray
+    cmd_u: np.ndarray                  # (N, 2) N
+    dist_t: np.ndarray
+    dist_d: np.ndarray                 # (N, q)
+    state_t: np.ndarray
+    leg_index: np.ndarray
+    leg_target: np.ndarray             # (N, 2)
+    d0: np.ndarray
+    d: np.ndarray
+    critic_w: list[np.ndarray]
+    actor_w: list[np.ndarray]
+    disturbance_w: list[np.ndarray]
+    safety_t: np.ndarray
+    d_rob: np.ndarray
+    d_rob_max: np.ndarray
+    clearance: np.ndarray
+    truth: list[tuple[float, list[tuple[str, np.ndarray]]]]      # every published set
+    detected: list[tuple[float, list[tuple[str, np.ndarray]]]]
+    augmented: list[tuple[float, list[tuple[str, np.ndarray]]]]
+    plans: list[tuple[float, np.ndarray]]                        # (t, (K, 2) path)
+    tree_segments: np.ndarray | None                             # last tree: (E, 2, 2)
+    goal: np.ndarray | None
+    topics: dict[str, int]
+
+
+def read_run(path: str | pathlib.Path) -> RunData:
+    """Decode every message of the topics the report uses."""
+    series: dict[str, list] = {k: [] for k in (
+        'odom', 'cmd', 'dist', 'state', 'safety', 'truth', 'detected', 'augmented', 'plan')}
+    tree = None
+    goal = None
+    topics: dict[str, int] = {}
+    with open(path, 'rb') as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        for _, channel, _, msg in reader.iter_decoded_messages(log_time_order=True):
+            topic = channel.topic
+            topics[topic] = topics.get(topic, 0) + 1
+            if topic == '/odom':
+                p, v = msg.pose.pose.position, msg.twist.twist.linear
+                series['odom'].append((_stamp(msg.header), [p.x, p.y, v.x, v.y]))
+            elif topic == '/cmd_force':
+                series['cmd'].append((_stamp(msg.header), [msg.wrench.force.x,
+                                                           msg.wrench.force.y]))
+            elif topic == '/disturbance':
+                series['dist'].append((_stamp(msg.header), list(msg.value)))
+            elif topic == '/controller/state':
+                series['state'].append(msg)
+            elif topic == '/safety/status':
+                series['safety'].append(msg)
+            elif topic in ('/obstacles/truth', '/obstacles/detected', '/obstacles/augmented'):
+                series[topic.rsplit('/', 1)[1]].append((_stamp(msg.header), _polygons(msg)))
+            elif topic == '/plan':
+                series['plan'].append((_stamp(msg.header), np.array(
+                    [[p.pose.position.x, p.pose.position.y] for p in msg.poses]).reshape(-1, 2)))
+            elif topic == '/planner/tree':
+                tree = msg
+            elif topic == '/goal_pose':
+                goal = np.array([msg.pose.position.x, msg.pose.position.y])
+
+    def arrays(key: str, width: int) -> tuple[np.ndarray, np.ndarray]:
+        rows = sorted(series[key], key=lambda r: r[0])
+        if not rows:
+            return np.zeros(0), np.zeros((0, width))
+        return (np.array([r[0] for r in rows]),
+                np.array([r[1] for r in rows], dtype=float).reshape(len(rows), -1))
+
+    odom_t, odom_x = arrays('odom', 4)
+    cmd_t, cmd_u = arrays('cmd', 2)
+    dist_t, dist_d = arrays('dist', 1)
+    states = sorted(series['state'], key=lambda m: _stamp(m.header))
+    safety = sorted(series['safety'], key=lambda m: _stamp(m.header))
+    return RunData(
+        odom_t=odom_t, odom_x=odom_x, cmd_t=cmd_t, cmd_u=cmd_u, dist_t=dist_t, dist_d=dist_d,
+        state_t=np.array([_stamp(m.header) for m in states]),
+        leg_index=np.array([m.leg_index for m in states], dtype=int),
+        leg_target=np.array([[m.leg_target.x, m.leg_target.y] for m in states]).reshape(-1, 2),
+        d0=np.array([m.d0 for m in states]), d=np.array([m.d for m in states]),
+        critic_w=[np.asarray(m.critic_weights) for m in states],
+        actor_w=[np.asarray(m.actor_weights) for m in states],
+        disturbance_w=[np.asarray(m.disturbance_weights) for m in states],
+        safety_t=np.array([_stamp(m.header) for m in safety]),
+        d_rob=np.array([m.d_rob for m in safety]),
+        d_rob_max=np.array([m.d_rob_max for m in safety]),
+        clearance=np.array([m.min_clearance for m in safety]),
+        truth=series['truth'], detected=series['detected'], augmented=series['augmented'],
+        plans=series['plan'], tree_segments=_tree_segments(tree), goal=goal, topics=topics)
+
+
+def _tree_segments(msg) -> np.ndarray | None:
+    """Line-list markers of the last /planner/tree message as (E, 2, 2) segments."""
+    if msg is None:
+        return None
+    points = [[p.x, p.y] for marker in msg.markers if marker.type == 5   # LINE_LIST
+              for p in marker.points]
+    return np.array(points, dtype=float).reshape(-1, 2, 2)
