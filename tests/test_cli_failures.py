@@ -39,8 +39,10 @@ BAD = {
     'negative mass': (GOOD.replace('stiffness: 0.0}', 'stiffness: 0.0, mass: -1}'),
                       'plant.mass'),
     'YAML syntax error': (GOOD.replace('goal: [10.0, 10.0]', 'goal: [10.0, 10.0'), ''),
-    'not implemented variant': (GOOD.replace('{variant: open_loop, forces: [[0.0, 5.0, 5.0]]}',
-                                             '{variant: nominal}'), 'controller.variant'),
+    'robust without gamma': (GOOD.replace('{variant: open_loop, forces: [[0.0, 5.0, 5.0]]}',
+                                          '{variant: robust}'), 'controller.gamma'),
+    'unknown planner key': (GOOD.replace('duration: 600.0', 'duration: 600.0\nplanner: {delta: 2}'),
+                            'planner.delta'),
 }
 
 

@@ -31,7 +31,7 @@ from rrtq_sim.scenario import Scenario
 
 EXIT_SUCCESS, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 DOMAIN_LOCK_DIR = pathlib.Path('/tmp/rrtq-domains')
-IMPLEMENTED_VARIANTS = ('open_loop',)
+IMPLEMENTED_VARIANTS = ('open_loop', 'nominal', 'robust')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -101,7 +101,8 @@ class Run:
         ctrl = scenario.controller
         self.monitor = MissionMonitor(MissionConfig(
             goal=(float(scenario.goal[0]), float(scenario.goal[1])),
-            goal_tolerance=options.goal_tolerance, duration=scenario.duration,
+            goal_tolerance=float(scenario.planner.get('goal_tolerance', options.goal_tolerance)),
+            duration=scenario.duration,
             robot_radius=scenario.robot_radius, dt=ctrl.dt,
             stop_at_goal=str(ctrl.variant) != 'open_loop'), scenario.obstacles)
         self.stop_requested: str | None = None
@@ -133,7 +134,11 @@ class Run:
         last_step, last_change = -1, time.monotonic()
         self.first_step_wall: float | None = None
         while self.monitor.outcome is Outcome.RUNNING:
-            executor.spin_once(timeout_sec=0.05)
+            try:
+                executor.spin_once(timeout_sec=0.05)
+            except Exception as exc:  # a node of the composed graph raised
+                self._composed_failure(exc)
+                break
             now = time.monotonic()
             if self.monitor.steps != last_step:
                 if self.first_step_wall is None and self.monitor.steps > 0:
@@ -198,6 +203,19 @@ class Run:
         return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent,
                                 start_new_session=True)
+
+    def _composed_failure(self, exc: Exception) -> None:
+        """A callback raised in composed mode: the run fails naming the node's module."""
+        import traceback
+        text = ''.join(traceback.format_exception(exc))
+        (self.out / 'logs' / 'composed.log').write_text(text)
+        frames = traceback.extract_tb(exc.__traceback__)
+        node_frames = [f for f in frames if '/rrtq_' in f.filename and 'orchestrator' not in
+                       f.filename]
+        where = pathlib.Path(node_frames[0].filename).stem if node_frames else 'unknown'
+        self.failed_node = {'node': where, 'status': f'raised {type(exc).__name__}: {exc}',
+                            'exit_code': None, 'log_tail': text.strip().splitlines()[-15:]}
+        self.monitor.finish(Outcome.NODE_FAILED, f"node '{where}' raised {type(exc).__name__}")
 
     def _halt_simulator_process(self) -> None:
         """Stop stepping at once: the recording ends where the mission ended."""

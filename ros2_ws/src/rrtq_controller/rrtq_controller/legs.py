@@ -90,6 +90,28 @@ class LegSequencer:
             return None
         return self._start(x, t)
 
+    def follow_plan(self, waypoints: ArrayLike, x: Array, t: float) -> bool:
+        """Adopt a new plan without breaking the current leg when it can go on.
+
+        When the plan passes through the current leg's target (within ``skip_radius``),
+        the leg continues and the waypoints after the target follow it; the controller's
+        own progress (the window D <= ρ D0) is kept even where the planner's notion of
+        the robot's next waypoint lags behind. Otherwise the plan is adopted afresh
+        (:meth:`set_plan`). Returns True when a new leg started.
+        """
+        pts = np.asarray(waypoints, dtype=float).reshape(-1, 2)
+        if self.leg is not None and len(pts):
+            hits = np.flatnonzero(
+                np.linalg.norm(pts - self.leg.target[:2], axis=1) <= self.skip_radius)
+            if hits.size:
+                j = int(hits[-1])
+                self._waypoints = [p for p in pts]
+                self._next = j
+                if j < len(pts) - 1:
+                    self.goal_reached = False
+                return False
+        return self.set_plan(pts, x, t) is not None
+
     def target_state(self, waypoint: Array) -> Array:
         """x_r: the waypoint position at rest."""
         xr = np.zeros(self.n)

@@ -85,9 +85,12 @@ class StepInputs:
         self.last_delivered: int | None = None
 
     def add(self, key: str, stamp_ns: int, msg: Any) -> None:
-        """File a message (a per-step key, the driver, or a follow-up key)."""
+        """File a message (a per-step key, the driver, or a follow-up key); others are
+        ignored."""
         if key in self._followups:
             self._followups[key][stamp_ns] = msg
+        elif key not in self._steps:
+            return                      # not an input of this node in this graph
         elif self.last_delivered is None or stamp_ns > self.last_delivered - self.dt_ns:
             self._steps[key][stamp_ns] = msg
 

@@ -220,6 +220,17 @@ class ControllerConfig:
         Admissible-window radius for the terminal-state evaluation, in units of x_bar.
     forces : tuple of (float, float, float)
         open_loop profile ``(t [s], f_x [N], f_y [N])``, piecewise constant from each t.
+    critic_law : str
+        ``least_squares`` (default) or ``gradient`` (the papers' normalised gradient law).
+    actor_law : str
+        ``whitened`` (default) or ``gradient`` (the papers' law).
+    initial_gain : numpy.ndarray, shape (m, n), or None
+        Initial actor gain K0 (u = -K0 x_bar): an admissible policy to start from, N per
+        state unit; None: zero (admissible only when the plant is stable by itself).
+    probing_std : float or None
+        Probing-noise standard deviation on the first leg, N (None: the core's default).
+    probing_decay : float or None
+        Factor applied to the probing standard deviation after each leg, in (0, 1].
     """
 
     variant: ControllerVariant
@@ -234,6 +245,11 @@ class ControllerConfig:
     gamma: float | None
     rho: float
     forces: tuple[tuple[float, float, float], ...]
+    critic_law: str = 'least_squares'
+    actor_law: str = 'whitened'
+    initial_gain: np.ndarray | None = None
+    probing_std: float | None = None
+    probing_decay: float | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -294,7 +310,7 @@ _LTI_KEYS = ('model', 'A', 'B', 'spring_anchor', 'force_limit')
 _DIST_KEYS = ('model', 'F', 'amplitude', 'frequency', 'gamma')
 _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
-    'forces',
+    'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
 )  # fmt: skip
 _TIMING_KEYS = ('appear_at', 'vanish_at', 'known')
 _DEFAULT_F4 = np.array([[0.0], [0.0], [-1.0], [1.0]])
@@ -527,7 +543,56 @@ def _controller(r: _Reader, raw: Any, n: int, m: int) -> ControllerConfig:
         gamma=gamma,
         rho=r.number(data.get('rho', 0.15), 'controller.rho', positive=True),
         forces=forces,
+        critic_law=_one_of(r, data.get('critic_law', 'least_squares'), 'controller.critic_law',
+                           ('least_squares', 'gradient')),
+        actor_law=_one_of(r, data.get('actor_law', 'whitened'), 'controller.actor_law',
+                          ('whitened', 'gradient')),
+        initial_gain=(None if data.get('initial_gain') is None else _frozen(
+            r.matrix(data['initial_gain'], 'controller.initial_gain', (m, n)))),
+        probing_std=(None if 'probing_std' not in data else r.number(
+            data['probing_std'], 'controller.probing_std', nonnegative=True)),
+        probing_decay=(None if 'probing_decay' not in data else _fraction(
+            r, data['probing_decay'], 'controller.probing_decay')),
     )
+
+
+# planner key -> (default, lowest value, integer?)
+PLANNER_KEYS: dict[str, tuple[float, float, bool]] = {
+    'steer_distance': (5.0, 1e-3, False),       # m, RRT^X delta
+    'epsilon': (0.0, 0.0, False),               # m, epsilon-consistency
+    'iterations_per_step': (30, 0, True),       # lock-step sampling budget per step
+    'max_nodes': (3000, 2, True),               # the graph stops growing at this size
+    'cycle_budget_ms': (10.0, 0.1, False),      # paced: wall time of sampling per cycle
+    'tree_period_s': (1.0, 0.0, False),         # sim time between /planner/tree messages
+    'goal_tolerance': (0.5, 1e-3, False),       # m, distance that counts as arrived
+    'growth_threshold': (0.05, 0.0, False),     # m, margin growth that republishes
+}
+
+
+def _planner(r: _Reader, raw: Any) -> dict[str, Any]:
+    data = r.mapping({} if raw is None else raw, 'planner', tuple(PLANNER_KEYS))
+    out: dict[str, Any] = {}
+    for key, (default, low, integer) in PLANNER_KEYS.items():
+        value = r.number(data.get(key, default), f'planner.{key}', nonnegative=True)
+        if value < low or (integer and value != int(value)):
+            kind = 'an integer' if integer else 'a number'
+            raise r.error(f'planner.{key}', f'must be {kind} >= {low}, got {value}')
+        out[key] = int(value) if integer else value
+    return out
+
+
+def _one_of(r: _Reader, value: Any, key: str, allowed: tuple[str, ...]) -> str:
+    text = r.string(value, key)
+    if text not in allowed:
+        raise r.error(key, f'{text!r} is not one of {", ".join(allowed)}')
+    return text
+
+
+def _fraction(r: _Reader, value: Any, key: str) -> float:
+    number = r.number(value, key, positive=True)
+    if number > 1.0:
+        raise r.error(key, f'must be in (0, 1], got {number}')
+    return number
 
 
 def _timing(r: _Reader, data: Mapping[str, Any], key: str) -> tuple[float, float, bool]:
@@ -691,11 +756,7 @@ def parse_scenario(data: Any, path: str) -> Scenario:
     robust = isinstance(ctrl_raw, Mapping) and ctrl_raw.get('variant') == 'robust'
     disturbance = _disturbance(r, data.get('disturbance'), plant.n, robust)
     controller = _controller(r, ctrl_raw, plant.n, plant.m)
-    planner = data.get('planner', {})
-    if planner is None:
-        planner = {}
-    if not isinstance(planner, Mapping):
-        raise r.error('planner', f'expected a mapping, got {type(planner).__name__}')
+    planner = _planner(r, data.get('planner'))
     obstacles = _obstacles(r, data.get('obstacles'), os.path.dirname(os.path.abspath(path)))
 
     for key, p in (('start', start), ('goal', goal)):

@@ -48,7 +48,7 @@ def test_full_example_loads():
     np.testing.assert_array_equal(c.R, np.diag([2.0, 3.0]))
     np.testing.assert_array_equal(c.P_T, 0.5 * np.eye(4))
     assert (c.alpha_c, c.alpha_a, c.alpha_d, c.gamma, c.rho, c.forces) == (90.0, 1.2, 2.5, 12.0, 0.15, ())
-    assert sc.planner == {'steer': 2.0}
+    assert sc.planner['steer_distance'] == 2.0 and sc.planner['iterations_per_step'] == 30
     by_id = {o.id: o for o in sc.obstacles}
     assert list(by_id) == ['box1', 'late', 'gone', 'small_otte_0', 'small_otte_1', 'small_otte_2']
     assert by_id['late'].appear_at == 40.0 and not by_id['late'].known
@@ -74,7 +74,7 @@ def test_defaults_follow_design_example():
     np.testing.assert_array_equal(c.M, 10.0 * np.eye(4))
     np.testing.assert_array_equal(c.R, 2.0 * np.eye(2))
     assert c.alpha_c is None and c.gamma is None
-    assert sc.planner == {} and sc.obstacles == ()
+    assert sc.planner['epsilon'] == 0.0 and sc.obstacles == ()
 
 
 def test_seed_override_and_builders():
@@ -180,6 +180,8 @@ ERRORS = [
     ({'seed': 1.5}, 'seed', 'integer'),
     ({'name': ''}, 'name', 'string'),
     ({'planner': [1, 2]}, 'planner', 'mapping'),
+    ({'planner': {'iterations_per_step': 1.5}}, 'planner.iterations_per_step', 'integer'),
+    ({'planner': {'steer': 1.0}}, 'planner.steer', 'unknown key'),
     ({'bounds': {'x': [1, -1], 'y': [0, 1]}}, 'bounds.x', 'min < max'),
     ({'bounds': {'x': [0, 1]}}, 'bounds.y', 'required'),
     ({'start': [0, 0, 0]}, 'start', '[x, y]'),

@@ -1,0 +1,118 @@
+"""What the controller node runs each step: plan -> legs -> force (no rclpy).
+
+``LearningDriver`` walks the planner's waypoints leg by leg (RRT-QX Algorithm 1) with
+the Q-learning controller; ``OpenLoopDriver`` plays a scripted force profile. Both
+take the full measured state and return a :class:`ControlOutput` for the node to
+publish.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .config import ControllerConfig
+from .legs import LegEvent, LegSequencer
+from .open_loop import ForceProfile
+from .q_learning import QLearningController
+
+Array = NDArray[np.float64]
+
+
+@dataclasses.dataclass(frozen=True)
+class ControlOutput:
+    """One step's command and the state worth publishing about it."""
+
+    u: Array                          # N, force to hold over the next step
+    leg_index: int
+    leg_start_time: float             # s
+    leg_start: Array                  # (2,) m
+    leg_target: Array                 # (2,) m
+    d0: float                         # m (RRT-QX (4))
+    d: float                          # m (RRT-QX (5))
+    time_to_go: float                 # s
+    probing: Array                    # N
+    critic_weights: Array
+    actor_weights: Array
+    disturbance_weights: Array
+    critic_error: float
+    terminal_error: float
+    event: str                        # LegEvent value, or 'no_plan'
+
+
+class LearningDriver:
+    """Leg sequencing (RRT-QX (4)-(5)) around the Q-learning controller."""
+
+    def __init__(self, config: ControllerConfig, n: int, m: int, q: int,
+                 rng: np.random.Generator) -> None:
+        self.controller = QLearningController(config, n, m, q, rng)
+        self.legs = LegSequencer(config.rho, config.horizon, n)
+        self.n, self.m = n, m
+
+    def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> None:
+        """Adopt the planner's waypoints (the robot's next waypoint first, the goal last).
+
+        The current leg goes on when the new plan still passes through its target (the
+        planner improved or repaired what lies beyond it); otherwise a new leg starts
+        from the current state toward the plan's first waypoint.
+        """
+        if self.legs.follow_plan(waypoints, np.asarray(x, dtype=float), t):
+            assert self.legs.leg is not None
+            self.controller.start_leg(self.legs.x_bar(x), t)
+
+    def step(self, t: float, x: ArrayLike, d_applied: ArrayLike | None = None) -> ControlOutput:
+        x = np.asarray(x, dtype=float)
+        event = self.legs.update(x, t)
+        c = self.controller
+        if event is LegEvent.NO_PLAN:
+            return self._output(np.zeros(self.m), x, event.value, t)
+        if event is LegEvent.NEW_LEG:
+            c.start_leg(self.legs.x_bar(x), t)
+        u = c.step(t, self.legs.x_bar(x),
+                   None if d_applied is None else np.asarray(d_applied, dtype=float))
+        return self._output(u, x, event.value, t)
+
+    def _output(self, u: Array, x: Array, event: str, t: float) -> ControlOutput:
+        leg, c = self.legs.leg, self.controller
+        empty = np.zeros(0)
+        return ControlOutput(
+            u=u, leg_index=leg.index if leg else 0,
+            leg_start_time=leg.start_time if leg else 0.0,
+            leg_start=leg.x0[:2].copy() if leg else x[:2].copy(),
+            leg_target=leg.target[:2].copy() if leg else x[:2].copy(),
+            d0=leg.d0 if leg else 0.0, d=self.legs.distance(x) if leg else 0.0,
+            time_to_go=c.time_to_go(t) if leg else 0.0,
+            probing=np.asarray(c.info.probing if c.info.probing.size else np.zeros(self.m)),
+            critic_weights=c.critic_weights, actor_weights=c.actor_weights,
+            disturbance_weights=c.disturbance_weights if c.robust else empty,
+            critic_error=float(c.info.e_c1), terminal_error=float(c.info.e_c2), event=event)
+
+
+class OpenLoopDriver:
+    """The scripted force profile; the 'leg' is the whole run toward the goal."""
+
+    def __init__(self, profile: ForceProfile, goal: ArrayLike, horizon: float) -> None:
+        self.profile = profile
+        self.goal = np.asarray(goal, dtype=float)
+        self.horizon = horizon
+        self.x0: Array | None = None
+
+    def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> None:
+        """A scripted run ignores plans."""
+
+    def step(self, t: float, x: ArrayLike, d_applied: ArrayLike | None = None) -> ControlOutput:
+        x = np.asarray(x, dtype=float)
+        target = np.concatenate([self.goal, np.zeros(x.size - 2)])
+        if self.x0 is None:
+            self.x0 = x.copy()
+        u = self.profile.force_at(t)
+        empty = np.zeros(0)
+        return ControlOutput(
+            u=u, leg_index=0, leg_start_time=0.0, leg_start=self.x0[:2].copy(),
+            leg_target=self.goal.copy(), d0=float(np.linalg.norm(self.x0 - target)),
+            d=float(np.linalg.norm(x - target)), time_to_go=max(0.0, self.horizon - t),
+            probing=np.zeros(u.size), critic_weights=empty, actor_weights=empty,
+            disturbance_weights=empty, critic_error=0.0, terminal_error=0.0,
+            event=LegEvent.CONTINUE.value)

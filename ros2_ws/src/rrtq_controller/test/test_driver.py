@@ -1,0 +1,51 @@
+"""The driver: plans become legs, a repaired plan through the same target keeps the leg."""
+
+import numpy as np
+import pytest
+from scipy.linalg import expm
+
+from rrtq_controller.config import ControllerConfig
+from rrtq_controller.driver import LearningDriver
+from rrtq_controller.legs import LegSequencer
+
+MASS, DAMPING = 40.0, 45.0
+A = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [0, 0, -DAMPING / MASS, 0], [0, 0, 0, -DAMPING / MASS]])
+B = np.array([[0, 0], [0, 0], [1 / MASS, 0], [0, 1 / MASS]])
+
+
+def zoh(dt):
+    big = np.zeros((6, 6))
+    big[:4, :4], big[:4, 4:] = A, B
+    e = expm(big * dt)
+    return e[:4, :4], e[:4, 4:]
+
+
+def test_follow_plan_keeps_the_leg_when_the_target_stays():
+    legs = LegSequencer(rho=0.15, horizon=10.0)
+    x = np.zeros(4)
+    assert legs.follow_plan([[0, 0], [5, 0], [5, 5]], x, 0.0)      # first plan: new leg
+    assert legs.leg.index == 0 and np.allclose(legs.leg.target[:2], [5, 0])
+    # The planner repaired what lies beyond the target: the leg goes on.
+    assert not legs.follow_plan([[5, 0], [7, 3], [5, 5]], x, 1.0)
+    assert legs.leg.index == 0
+    # A plan that no longer passes through the target starts a new leg.
+    assert legs.follow_plan([[0, 2], [5, 5]], x, 2.0)
+    assert legs.leg.index == 1 and np.allclose(legs.leg.target[:2], [0, 2])
+
+
+def test_driver_walks_the_waypoints_to_the_goal():
+    dt = 0.05
+    phi, gam = zoh(dt)
+    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=((40, 0, 30, 0), (0, 40, 0, 30)),
+                              probing_std=5.0)
+    driver = LearningDriver(config, 4, 2, 1, np.random.default_rng(1))
+    x = np.zeros(4)
+    driver.set_plan([[0, 0], [4, 0], [4, 4]], x, 0.0)
+    targets = set()
+    for k in range(int(40 / dt)):
+        out = driver.step(k * dt, x)
+        targets.add(tuple(np.round(out.leg_target, 6)))
+        x = phi @ x + gam @ out.u
+    assert targets == {(4.0, 0.0), (4.0, 4.0)}
+    assert np.linalg.norm(x[:2] - [4, 4]) < 0.3
+    assert out.leg_index >= 1 and out.critic_weights.size > 0

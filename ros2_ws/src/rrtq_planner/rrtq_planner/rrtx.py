@@ -1,0 +1,389 @@
+"""RRT^X: asymptotically optimal single-query planning with quick replanning.
+
+Otte & Frazzoli, "RRTX: Asymptotically optimal single-query sampling-based
+motion planning with quick replanning", IJRR 35(7), 2016.  Algorithm numbers
+below refer to that paper.  The tree is rooted at the goal; g is the
+cost-to-goal, lmc its one-step look-ahead; Q is keyed by (min(g, lmc), g).
+
+The module splits along the paper's seams: this file samples, extends and
+rewires (Algorithms 1-6, 12, 13); ``rrtx_obstacles`` handles obstacle changes
+(Algorithms 7-11); ``rrtx_robot`` moves v_bot and reads out the path.
+
+Deliberate deviations, each needed for a property the tests check:
+
+* ``cull_neighbors`` compares the geometric edge length with r(n), not the
+  cost (which is inf while blocked): blocked running edges survive culling
+  and ``remove_obstacle`` restores them (the reference code loses them).
+  Culling removes both halves of an edge, so out- and in-lists stay mirrors.
+* Culling during update_lmc / rewire waits until a running edge exceeds
+  1.05 r(n); r(n) shrinks at every insertion, and trimming lists by one edge
+  at a time cost more than the few extra neighbours.
+* When the ball around a sample is empty, the nearest node alone is used
+  (as the reference code does); otherwise a sample steered to distance
+  delta > r(n) could never join.
+* A new node gets g = lmc right after its rewiring (the reference queues it,
+  which only repeats the same rewiring when it is popped).
+* ``remove_obstacle`` queues a node when g - lmc > epsilon (the paper: g != lmc),
+  and a popped v_bot with g != lmc is always rewired.  Then every node outside
+  Q satisfies lmc(u) <= d(u, w) + g(w) for each edge u -> w, which gives the
+  bound proved in ``reduce_inconsistency``.
+* ``propagate_descendants`` re-roots all orphans with one Dijkstra search
+  (scipy) instead of queueing their neighbours with g = inf and popping them
+  one by one; see its docstring for why the result is the same.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .geometry import ObstacleMap
+from .graph import INF, RRTXGraph
+from .heap import KeyedQueue
+from .neighbors import PointIndex
+from .rrtx_config import PlanStatus, RRTXConfig
+from .rrtx_obstacles import ObstacleMixin
+from .rrtx_robot import RobotMixin
+
+__all__ = ["RRTX", "RRTXConfig", "PlanStatus"]
+
+_BATCH = 512
+# r(n) shrinks at every insertion; culling a node's list for each slight
+# shrink would cost more per pop than the few extra neighbours it removes.
+_CULL_SLACK = 1.05
+
+
+class RRTX(ObstacleMixin, RobotMixin):
+    """The RRT^X planner core (numpy/scipy only, deterministic given ``rng``).
+
+    Parameters
+    ----------
+    config : RRTXConfig
+        Planner parameters.
+    rng : numpy.random.Generator
+        The only source of randomness (drawn in batches of 512 samples).
+
+    Examples
+    --------
+    >>> cfg = RRTXConfig(goal=(0.0, -40.0), bounds=(-50.0, 50.0, -50.0, 50.0))
+    >>> planner = RRTX(cfg, np.random.default_rng(0))
+    >>> wall = np.array([[-5.0, -1.0], [5.0, -1.0], [5.0, 1.0], [-5.0, 1.0]])
+    >>> planner.add_obstacle("wall", wall)
+    >>> planner.set_robot((0.0, 40.0))
+    >>> planner.run(2000)
+    >>> planner.status
+    <PlanStatus.FOUND: 'found'>
+    >>> waypoints = planner.path()  # (N, 2): robot, v_bot, ..., goal
+    """
+
+    def __init__(self, config: RRTXConfig, rng: np.random.Generator) -> None:
+        self.config = config
+        self._rng = rng
+        self._eps = config.epsilon
+        self.graph = RRTXGraph()
+        self.queue = KeyedQueue()
+        self.index = PointIndex()
+        self.obstacles = ObstacleMap()
+        self._blocked_by: dict[str, np.ndarray] = {}
+        self._orphans: list[int] = []
+        goal = np.asarray(config.goal, dtype=float)
+        self.goal = self.graph.add_node(goal)
+        self.index.insert(goal)
+        self.graph.g[self.goal] = 0.0
+        self.graph.lmc[self.goal] = 0.0
+        x0, x1, y0, y1 = config.bounds
+        rr = config.robot_radius
+        self._lo = np.array([x0 + rr, y0 + rr])
+        self._span = np.array([x1 - x0 - 2 * rr, y1 - y0 - 2 * rr])
+        self._samples = np.zeros((0, 3))
+        self._next = 0
+        self.radius = config.ball_radius(1)
+        self.iterations = 0
+        self._init_robot()
+
+    # ------------------------------------------------------------ sampling
+    @property
+    def node_count(self) -> int:
+        """Number of nodes |V| (the goal included)."""
+        return self.graph.n
+
+    def _draw(self) -> np.ndarray:
+        if self._next == self._samples.shape[0]:
+            self._samples = self._rng.random((_BATCH, 3))
+            self._next = 0
+        row: np.ndarray = self._samples[self._next]
+        self._next += 1
+        return row
+
+    def run(self, iterations: int) -> None:
+        """Run ``iterations`` sampling iterations (the main loop of Algorithm 1)."""
+        for _ in range(iterations):
+            self.step()
+
+    def step(self) -> int | None:
+        """One iteration of Algorithm 1: sample, extend, rewire, reduce.
+
+        Returns
+        -------
+        int or None
+            The new node's index, or None when the sample was rejected.
+        """
+        self.iterations += 1
+        cfg = self.config
+        self.radius = cfg.ball_radius(self.graph.n)
+        row = self._draw()
+        robot = self.robot
+        is_robot = (
+            self.vbot < 0 and robot is not None and row[2] < cfg.robot_sample_probability
+        )
+        point = robot if is_robot and robot is not None else self._lo + self._span * row[:2]
+        nearest, dist, near = self.index.nearest_and_near(point, self.radius)
+        if dist == 0.0:
+            if is_robot:
+                self._attach_robot(nearest)
+            return None
+        if dist > cfg.steer_distance:
+            # Saturate towards the nearest node (Algorithm 1).
+            base = self.graph.pos[nearest]
+            point = base + (point - base) * (cfg.steer_distance / dist)
+            is_robot = False
+            nearest, dist, near = self.index.nearest_and_near(point, self.radius)
+        if not self.obstacles.point_free(point):
+            return None
+        v = self.extend(point, near)
+        if v is None:
+            return None
+        self.rewire_neighbors(v)
+        self.graph.g[v] = self.graph.lmc[v]
+        if is_robot:
+            self._attach_robot(v)
+        self.reduce_inconsistency()
+        return v
+
+    # ------------------------------------------------------- tree building
+    def extend(self, point: np.ndarray, near: np.ndarray) -> int | None:
+        """Algorithm 2: insert ``point`` if it can reach the tree.
+
+        The new node gets its parent from ``find_parent`` and an edge to every
+        near node with a free segment (the straight segment is free in both
+        directions or in neither, so both directions are created).
+
+        Parameters
+        ----------
+        point : numpy.ndarray
+            Collision-free sample, shape (2,), metres.
+        near : numpy.ndarray
+            Node indices within the ball r(n) (or the nearest node alone).
+
+        Returns
+        -------
+        int or None
+            The new node, or None when no near node offers a finite cost.
+        """
+        near, lengths, j = self.find_parent(point, near)
+        if j < 0:
+            return None
+        gr = self.graph
+        v = gr.add_node(point)
+        self.index.insert(point)
+        gr.lmc[v] = lengths[j] + gr.lmc[near[j]]
+        gr.make_parent_of(int(near[j]), v)
+        gr.add_edges(v, near, lengths)
+        return v
+
+    def find_parent(
+        self, point: np.ndarray, near: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, int]:
+        """Algorithm 6: the near node u minimising d(v, u) + lmc(u).
+
+        Returns
+        -------
+        near : numpy.ndarray
+            The near nodes with a collision-free segment to ``point``.
+        lengths : numpy.ndarray
+            Their distances to ``point`` (m).
+        best : int
+            Index into ``near`` of the parent, or -1 when none has finite cost.
+        """
+        gr = self.graph
+        ends = gr.pos[near]
+        free = self.obstacles.segments_free_from(point, ends, start_free=True)
+        if not free.all():
+            near = near[free]
+            ends = ends[free]
+        if near.shape[0] == 0:
+            return near, np.zeros(0), -1
+        diff = ends - point
+        lengths = np.sqrt(np.einsum("ij,ij->i", diff, diff))
+        costs = lengths + gr.lmc[near]
+        j = int(costs.argmin())
+        return near, lengths, (j if costs[j] < INF else -1)
+
+    def cull_neighbors(self, v: int) -> None:
+        """Algorithm 3 with r = r(n) (geometric length, see the module notes).
+
+        Inside update_lmc / rewire a list is culled only once its longest
+        running edge exceeds 1.05 r(n) (then down to r(n)); this call is exact.
+        """
+        self.graph.cull(v, self.radius)
+
+    def rewire_neighbors(self, v: int) -> None:
+        """Algorithm 4: offer v as parent to its in-neighbours if g(v) - lmc(v) > eps."""
+        if self.graph.g[v] > self.graph.lmc[v] + self._eps:
+            self._rewire(v)
+
+    def _rewire(self, v: int) -> None:
+        """Algorithm 4 without its entry test (callers decide)."""
+        self._update_and_rewire(v, update=False, rewire=True)
+
+    def update_lmc(self, v: int) -> None:
+        """Algorithm 13: best parent among non-orphan out-neighbours not below v.
+
+        Culls v's running out-list first; lmc(v) only ever decreases here.
+        """
+        self._update_and_rewire(v, update=True, rewire=False)
+
+    def verify_queue(self, v: int) -> None:
+        """Algorithm 12: insert v into Q or update its key (min(g, lmc), g)."""
+        g = self.graph.g.item(v)
+        lmc = self.graph.lmc.item(v)
+        self.queue.push(v, lmc if lmc < g else g, g)
+
+    def reduce_inconsistency(self) -> None:
+        """Algorithm 5: process Q until v_bot is consistent and settled.
+
+        Loops while Q is non-empty and (top key < key(v_bot), or g(v_bot) !=
+        lmc(v_bot), or g(v_bot) = inf, or v_bot in Q); with no v_bot it drains Q.
+        Bound.  Two invariants hold between calls: (I1) every node w outside Q
+        has g(w) >= lmc(w) and g(w) - lmc(w) <= eps; (I2) for every edge
+        u -> w with w outside Q, lmc(u) <= d(u, w) + g(w).  Take any path
+        x_0 = v_bot, ..., x_k = goal and let x_j be its queued node nearest
+        the goal (j = 0 if none is queued).  Chaining I2 and I1 along
+        x_j .. x_k gives lmc(x_j) <= cost(x_j .. x_k) + (k - j - 1) eps, and
+        on exit key(v_bot) <= key(x_j) <= lmc(x_j), so g(v_bot) <=
+        cost(path) + (k - 1) eps.  Since every lmc is the cost of a real
+        parent chain, D <= g(v_bot) <= D + (k - 1) eps, with D the
+        shortest-path cost over the planner's current edges and k the number
+        of edges of a shortest path; eps = 0 gives g(v_bot) = D exactly.
+        """
+        q = self.queue
+        gr = self.graph
+        g = gr.g
+        lmc = gr.lmc
+        eps = self._eps
+        vb = self.vbot
+        if vb >= 0 and g[vb] != lmc[vb] and vb not in q:
+            self.verify_queue(vb)
+        while len(q):
+            if vb >= 0:
+                gb = g.item(vb)
+                lb = lmc.item(vb)
+                if gb == lb and gb < INF and vb not in q:
+                    top = q.top_key()
+                    if top is None or not top < (lb, gb):
+                        break
+            v = q.pop()
+            gv = g.item(v)
+            lv = lmc.item(v)
+            if gv > lv + eps or (v == vb and gv != lv):
+                self._update_and_rewire(v, update=True, rewire=True)
+                lv = lmc.item(v)
+            g[v] = lv
+
+    def _update_and_rewire(self, v: int, update: bool, rewire: bool) -> None:
+        """Cull, then ``update_lmc`` (Alg. 13) and/or ``rewire`` (Alg. 4) of v.
+
+        One body for both steps: reduce_inconsistency runs them back to back
+        once per queue pop, the planner's innermost loop, so lookups are
+        shared and makeParentOf / verrifyQueue are inlined in the rewiring.
+        """
+        gr = self.graph
+        r = self.radius
+        if gr.max_running.item(v) > r * _CULL_SLACK:
+            gr.cull(v, r)
+        lmc = gr.lmc
+        ecost = gr.ecost
+        parent = gr.parent
+        lv = lmc.item(v)
+        if update and v != self.goal:
+            ol = gr.out_lists
+            s = ol.start.item(v)
+            t = s + ol.count.item(v)
+            if t > s:
+                heads = ol.node[s:t]
+                costs = ecost[ol.edge[s:t]]
+                costs += lmc[heads]
+                # The paper also skips children u of v; no mask is needed:
+                # lmc(u) was set to d(u, v) + lmc(v) and lmc(v) has only
+                # decreased since, so d(v, u) + lmc(u) > lmc(v) never wins.
+                if self._orphans:
+                    costs[gr.orphan[heads]] = INF
+                j = costs.argmin()
+                c = costs.item(j)
+                if c < lv:
+                    lmc[v] = c
+                    lv = c
+                    gr.make_parent_of(heads.item(j), v)
+        if not rewire:
+            return
+        if gr.in_dead.item(v):
+            gr.compact_in(v)
+        il = gr.in_lists
+        s = il.start.item(v)
+        t = s + il.count.item(v)
+        tails = il.node[s:t]
+        cand = ecost[il.edge[s:t]]
+        cand += lv
+        idx = (lmc[tails] > cand).nonzero()[0]
+        if idx.shape[0] == 0:
+            return
+        g = gr.g
+        children = gr.children
+        mine = children[v]
+        push = self.queue.push
+        eps = self._eps
+        par = parent.item(v)
+        for u, c in zip(tails[idx].tolist(), cand[idx].tolist()):
+            if u == par:
+                continue
+            lmc[u] = c
+            old = parent.item(u)
+            if old >= 0:
+                children[old].discard(u)
+            parent[u] = v
+            mine.add(u)
+            gu = g.item(u)
+            if gu > c + eps:
+                push(u, c, gu)
+
+    # ------------------------------------------------------------ results
+    def edges(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """All directed edges (tail, head, current cost in m; inf if blocked)."""
+        return self.graph.directed_edges()
+
+    def neighbors(self, v: int) -> dict[str, list[int]]:
+        """N0+, N0-, Nr+, Nr- of v as sorted node lists."""
+        return self.graph.neighbor_lists(v)
+
+    @property
+    def g(self) -> np.ndarray:
+        """Copy of g (m) for all nodes."""
+        return self.graph.g[: self.graph.n].copy()
+
+    @property
+    def lmc(self) -> np.ndarray:
+        """Copy of lmc (m) for all nodes."""
+        return self.graph.lmc[: self.graph.n].copy()
+
+    @property
+    def parents(self) -> np.ndarray:
+        """Copy of the parent pointers (-1: none)."""
+        return self.graph.parent[: self.graph.n].copy()
+
+    @property
+    def positions(self) -> np.ndarray:
+        """Copy of node positions (n, 2) in m."""
+        return self.graph.pos[: self.graph.n].copy()
+
+    def queue_contents(self) -> list[int]:
+        """Nodes currently in Q."""
+        return sorted(self.queue.nodes())

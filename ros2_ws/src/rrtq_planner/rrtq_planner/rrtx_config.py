@@ -1,0 +1,95 @@
+"""Configuration and outcome types of the RRT^X core."""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+
+class PlanStatus(enum.Enum):
+    """What the planner can currently offer the robot."""
+
+    SEARCHING = "searching"
+    """The robot's position has not joined the tree yet."""
+    FOUND = "found"
+    """A collision-free path from the robot to the goal is known."""
+    NO_PATH = "no_path"
+    """The robot was connected, but obstacles cut it off from the goal."""
+
+
+@dataclass(frozen=True)
+class RRTXConfig:
+    """Parameters of RRT^X in 2D position space (Otte & Frazzoli, IJRR 2016).
+
+    Attributes
+    ----------
+    goal : tuple[float, float]
+        Goal position (m); the root of the tree.
+    bounds : tuple[float, float, float, float]
+        Sampling region (x_min, x_max, y_min, y_max) in m.
+    steer_distance : float
+        delta (m): samples farther than this from the tree are saturated
+        towards their nearest node, and r(n) never exceeds it.
+    epsilon : float
+        epsilon (m): the consistency tolerance; lmc decreases of at most
+        epsilon are not propagated.  0 gives exact shortest paths on the graph.
+    ball_constant : float or None
+        gamma (m) of r(n) = min(gamma (log n / n)^(1/2), delta).  None derives
+        it from ``free_space_measure``: 10 % above the paper's lower bound
+        2 (1 + 1/d)^(1/d) (mu(X_free) / zeta_d)^(1/d) with d = 2.
+    free_space_measure : float or None
+        mu(X_free) in m^2; None uses the area of ``bounds`` (an upper bound,
+        which only enlarges the ball).
+    robot_radius : float
+        m.  Samples keep this distance from the border of ``bounds``.  Obstacle
+        polygons are expected already grown by it.
+    robot_sample_probability : float
+        Probability (0..1) that an iteration samples the robot's position
+        while the robot has not yet joined the tree.
+    reach_tolerance : float
+        m.  ``set_robot`` moves v_bot on to its parent once the robot is this
+        close to v_bot.
+    """
+
+    goal: tuple[float, float]
+    bounds: tuple[float, float, float, float]
+    steer_distance: float = 5.0
+    epsilon: float = 0.0
+    ball_constant: float | None = None
+    free_space_measure: float | None = None
+    robot_radius: float = 0.0
+    robot_sample_probability: float = 0.05
+    reach_tolerance: float = 1e-3
+
+    def __post_init__(self) -> None:
+        x0, x1, y0, y1 = self.bounds
+        if not (x1 - x0 > 2 * self.robot_radius and y1 - y0 > 2 * self.robot_radius):
+            raise ValueError("bounds must be non-empty after shrinking by robot_radius")
+        if self.steer_distance <= 0:
+            raise ValueError("steer_distance must be > 0")
+        if self.epsilon < 0:
+            raise ValueError("epsilon must be >= 0")
+        if self.ball_constant is not None and self.ball_constant <= 0:
+            raise ValueError("ball_constant must be > 0")
+        if self.free_space_measure is not None and self.free_space_measure <= 0:
+            raise ValueError("free_space_measure must be > 0")
+        if self.robot_radius < 0 or self.reach_tolerance < 0:
+            raise ValueError("robot_radius and reach_tolerance must be >= 0")
+        if not 0.0 <= self.robot_sample_probability <= 1.0:
+            raise ValueError("robot_sample_probability must be in [0, 1]")
+
+    @property
+    def gamma(self) -> float:
+        """The ball constant gamma in m (given or derived)."""
+        if self.ball_constant is not None:
+            return self.ball_constant
+        x0, x1, y0, y1 = self.bounds
+        mu = self.free_space_measure or (x1 - x0) * (y1 - y0)
+        return 1.1 * 2.0 * math.sqrt(1.5) * math.sqrt(mu / math.pi)
+
+    def ball_radius(self, n: int) -> float:
+        """r(n) = min(gamma (log n / n)^(1/2), delta) in m (paper, eq. 1)."""
+        if n < 2:
+            return self.steer_distance
+        return min(self.gamma * math.sqrt(math.log(n) / n), self.steer_distance)

@@ -1,0 +1,437 @@
+"""Properties of the RRT^X core: tree invariants and exact repair.
+
+Every check compares the planner with something computed independently:
+Dijkstra (scipy) over the planner's own current edges, a brute-force
+collision check of the path, or a snapshot taken before an obstacle change.
+"""
+
+import time
+
+import numpy as np
+import pytest
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from rrtq_planner.geometry import segments_hit_polygon
+from rrtq_planner.rrtx import RRTX, PlanStatus, RRTXConfig
+
+BOUNDS = (-20.0, 20.0, -20.0, 20.0)
+GOAL = (15.0, 15.0)
+START = (-15.0, -15.0)
+STATIC = {
+    "s1": np.array([[-8.0, -6.0], [-2.0, -6.0], [-2.0, -1.0], [-8.0, -1.0]]),
+    "s2": np.array([[3.0, 2.0], [9.0, 4.0], [6.0, 9.0]]),
+}
+
+
+def box(cx, cy, hx, hy):
+    return np.array(
+        [[cx - hx, cy - hy], [cx + hx, cy - hy], [cx + hx, cy + hy], [cx - hx, cy + hy]]
+    )
+
+
+def build(seed=0, eps=0.0, iterations=1200, obstacles=STATIC, delta=3.0):
+    cfg = RRTXConfig(goal=GOAL, bounds=BOUNDS, steer_distance=delta, epsilon=eps)
+    planner = RRTX(cfg, np.random.default_rng(seed))
+    for oid, poly in obstacles.items():
+        planner.add_obstacle(oid, poly)
+    planner.set_robot(START)
+    planner.run(iterations)
+    assert planner.status is PlanStatus.FOUND
+    return planner
+
+
+def dijkstra_to_goal(planner):
+    """Cost-to-goal of every node over the planner's current directed edges."""
+    tail, head, cost = planner.edges()
+    ok = np.isfinite(cost)
+    n = planner.node_count
+    # Reverse the edges so one search from the goal gives cost-to-goal.
+    graph = csr_matrix((cost[ok], (head[ok], tail[ok])), shape=(n, n))
+    dist, pred = dijkstra(graph, indices=planner.goal, return_predecessors=True)
+    return dist, pred
+
+
+def hops(pred, v, goal):
+    k = 0
+    while v != goal:
+        v = pred[v]
+        k += 1
+    return k
+
+
+def assert_matches_dijkstra(planner, tol=1e-9):
+    dist, pred = dijkstra_to_goal(planner)
+    g = planner.g[planner.vbot]
+    if not np.isfinite(dist[planner.vbot]):
+        assert g == np.inf
+        return dist
+    # With eps = 0 exact; else D <= g <= D + (k - 1) eps, k = edges of the
+    # shortest path (the bound derived in RRTX.reduce_inconsistency).
+    k = hops(pred, planner.vbot, planner.goal)
+    slack = max(k - 1, 0) * planner.config.epsilon
+    assert dist[planner.vbot] - tol <= g <= dist[planner.vbot] + slack + tol
+    return dist
+
+
+def inside_convex(points, poly):
+    """Test points against a closed convex polygon, independently of the planner."""
+    a = poly
+    b = np.roll(poly, -1, axis=0)
+    cross = (b[:, 0] - a[:, 0]) * (points[:, None, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (
+        points[:, None, 0] - a[:, 0]
+    )
+    return np.all(cross >= 0, axis=1) | np.all(cross <= 0, axis=1)
+
+
+def assert_path_clear(path, polygons, spacing=0.005):
+    assert path.shape[0] >= 2
+    for p, q in zip(path[:-1], path[1:]):
+        m = max(2, int(np.ceil(np.linalg.norm(q - p) / spacing)) + 1)
+        pts = p + np.linspace(0.0, 1.0, m)[:, None] * (q - p)
+        for poly in polygons:
+            assert not inside_convex(pts, poly).any()
+
+
+def assert_invariants(planner):
+    gr = planner.graph
+    n = planner.node_count
+    parent = planner.parents
+    lmc = planner.lmc
+    g = planner.g
+    eps = planner.config.epsilon
+    tail, head, cost = planner.edges()
+    out = {v: set() for v in range(n)}
+    ecost = {}
+    for t, h, c in zip(tail.tolist(), head.tolist(), cost.tolist()):
+        assert h not in out[t]
+        out[t].add(h)
+        ecost[(t, h)] = c
+    # Parents form a tree rooted at the goal; children mirror parents.
+    assert parent[planner.goal] == -1 and lmc[planner.goal] == 0.0
+    for v in range(n):
+        p = parent[v]
+        assert gr.children[v] == set(np.flatnonzero(parent == v).tolist())
+        if v == planner.goal:
+            continue
+        if p < 0:
+            assert lmc[v] == np.inf
+            continue
+        assert p in out[v] and np.isfinite(ecost[(v, p)])
+        assert lmc[v] >= ecost[(v, p)] + lmc[p] - 1e-9
+        seen, u = 0, v
+        while u != planner.goal:
+            u = parent[u]
+            seen += 1
+            assert u >= 0 and seen <= n
+    # Neighbour lists are mirror images: u in N+(v) <=> v in N-(u).
+    for v in range(n):
+        lists = planner.neighbors(v)
+        assert set(lists["out_original"]) | set(lists["out_running"]) == out[v]
+        for u in lists["in_original"] + lists["in_running"]:
+            assert v in out[u]
+        assert not set(lists["out_original"]) & set(lists["out_running"])
+    # Heap flags match membership; nodes outside Q are eps-consistent and
+    # satisfy lmc(u) <= d(u, w) + g(w) on every edge u -> w.
+    queued = set(planner.queue_contents())
+    live = {e[3] for e in planner.queue._heap if planner.queue._stamp[e[3]] == e[2]}
+    assert queued == live & queued and len(planner.queue) == len(queued)
+    for w in range(n):
+        if w in queued:
+            continue
+        assert g[w] >= lmc[w] and (g[w] == lmc[w] or g[w] - lmc[w] <= eps)
+    for (u, w), c in ecost.items():
+        if w not in queued and np.isfinite(g[w]) and u != planner.goal:
+            assert lmc[u] <= c + g[w] + 1e-9
+
+
+def test_invariants_hold_while_growing_and_repairing():
+    # delta well above r(n), so that the ball shrinks and culling happens.
+    planner = build(seed=1, iterations=600, delta=10.0)
+    assert planner.radius < 10.0
+    originals = {v: planner.neighbors(v)["out_original"] for v in range(planner.node_count)}
+    assert_invariants(planner)
+    planner.add_obstacle("wall", box(0.0, 0.0, 1.0, 12.0))
+    assert_invariants(planner)
+    planner.run(300)
+    planner.remove_obstacle("s1")
+    assert_invariants(planner)
+    for v, before in originals.items():  # N0+ never shrinks
+        assert planner.neighbors(v)["out_original"] == before
+    r = planner.radius
+    pos = planner.positions
+    for v in range(planner.node_count):
+        planner.cull_neighbors(v)
+        for u in planner.neighbors(v)["out_running"]:
+            assert np.linalg.norm(pos[u] - pos[v]) <= r or planner.parents[v] == u
+    assert not planner.graph.eback[: planner.graph.ne].all()  # some edges were culled
+    assert_invariants(planner)
+    assert_matches_dijkstra(planner)
+
+
+@pytest.mark.parametrize("eps", [0.0, 0.5])
+def test_cost_equals_dijkstra_through_obstacle_changes(eps):
+    planner = build(seed=2, eps=eps)
+    assert_matches_dijkstra(planner)
+    path = planner.path()
+    mid = path[len(path) // 2]
+    changes = [
+        ("add", "block", box(mid[0], mid[1], 2.0, 2.0)),
+        ("add", "bar", box(-5.0, 8.0, 6.0, 0.5)),
+        ("remove", "s2", None),
+        ("remove", "block", None),
+        ("add", "s2", STATIC["s2"]),
+        ("remove", "bar", None),
+    ]
+    for op, oid, poly in changes:
+        if op == "add":
+            planner.add_obstacle(oid, poly)
+        else:
+            planner.remove_obstacle(oid)
+        assert_matches_dijkstra(planner)
+        planner.run(150)
+        assert_matches_dijkstra(planner)
+
+
+def test_blocking_obstacle_is_repaired_collision_free():
+    planner = build(seed=3)
+    path = planner.path()
+    before = planner.cost()
+    # A box across the middle of the current path.
+    mid = path[len(path) // 2]
+    block = box(mid[0], mid[1], 2.5, 2.5)
+    assert segments_hit_polygon(path[:-1], path[1:], block).any()
+    planner.add_obstacle("block", block)
+    assert planner.status is PlanStatus.FOUND
+    assert planner.cost() > before
+    dist = assert_matches_dijkstra(planner)
+    to_vbot = np.linalg.norm(np.subtract(START, planner.positions[planner.vbot]))
+    assert planner.cost() == pytest.approx(dist[planner.vbot] + to_vbot)
+    repaired = planner.path()
+    assert_path_clear(repaired, [block, *STATIC.values()])
+    seg_cost = np.sum(np.linalg.norm(np.diff(repaired, axis=0), axis=1))
+    assert seg_cost == pytest.approx(planner.cost(), abs=1e-9)
+
+
+def snapshot(planner):
+    gr = planner.graph
+    return {
+        "g": planner.g,
+        "lmc": planner.lmc,
+        "parent": planner.parents,
+        "ecost": gr.ecost[: gr.ne].copy(),
+        "eback": gr.eback[: gr.ne].copy(),
+        "queue": planner.queue_contents(),
+        "cost": planner.cost(),
+    }
+
+
+def test_obstacle_touching_no_edge_changes_nothing():
+    planner = build(seed=4)
+    gr = planner.graph
+    rng = np.random.default_rng(0)
+    a = gr.pos[gr.ea[: gr.ne]]
+    b = gr.pos[gr.eb[: gr.ne]]
+    for _ in range(2000):  # find a small triangle in a gap of the graph
+        c = rng.uniform(-19, 19, 2)
+        tri = c + np.array([[0.0, 0.0], [0.15, 0.0], [0.0, 0.15]])
+        if not segments_hit_polygon(a, b, tri).any():
+            break
+    else:
+        pytest.fail("no empty spot found")
+    before = snapshot(planner)
+    planner.add_obstacle("tiny", tri)
+    after = snapshot(planner)
+    for key in before:
+        np.testing.assert_array_equal(before[key], after[key])
+
+
+@pytest.mark.parametrize("delta", [3.0, 10.0])
+def test_add_then_remove_restores_costs_exactly(delta):
+    planner = build(seed=5, delta=delta)
+    for v in range(planner.node_count):  # settle culling at the current r(n)
+        planner.cull_neighbors(v)
+    before = snapshot(planner)
+    path = planner.path()
+    mid = path[len(path) // 3]
+    planner.add_obstacle("block", box(mid[0], mid[1], 3.0, 3.0))
+    assert planner.cost() > before["cost"]
+    planner.remove_obstacle("block")
+    after = snapshot(planner)
+    np.testing.assert_array_equal(before["ecost"], after["ecost"])
+    assert_matches_dijkstra(planner)
+    changed = np.flatnonzero(before["eback"] != after["eback"])
+    if planner.radius == delta:
+        # r(n) = delta: no edge is longer than the ball, nothing can be culled,
+        # and the graph and g(v_bot) come back bit for bit.
+        assert changed.size == 0
+        assert after["g"][planner.vbot] == before["g"][planner.vbot]
+        assert after["cost"] == before["cost"]
+    else:
+        # With r(n) < delta a parent edge may be longer than r(n); once the
+        # repair re-parents its tail, Algorithm 3 culls it for good, so the
+        # restored cost can only be the same or higher -- and still exact.
+        assert np.all(planner.graph.elen[changed] > planner.radius)
+        assert after["g"][planner.vbot] >= before["g"][planner.vbot]
+
+
+def test_overlapping_obstacles_keep_shared_edges_blocked():
+    planner = build(seed=6)
+    path = planner.path()
+    mid = path[len(path) // 2]
+    first = box(mid[0] - 1.0, mid[1], 2.0, 2.0)
+    second = box(mid[0] + 1.0, mid[1], 2.0, 2.0)
+    planner.add_obstacle("first", first)
+    planner.add_obstacle("second", second)
+    planner.remove_obstacle("first")
+    gr = planner.graph
+    a = gr.pos[gr.ea[: gr.ne]]
+    b = gr.pos[gr.eb[: gr.ne]]
+    blocked = np.zeros(gr.ne, dtype=bool)
+    for poly in [second, *STATIC.values()]:
+        blocked |= segments_hit_polygon(a, b, poly)
+    np.testing.assert_array_equal(np.isinf(gr.ecost[: gr.ne]), blocked)
+    assert_matches_dijkstra(planner)
+    assert_path_clear(planner.path(), [second, *STATIC.values()])
+
+
+def test_enclosed_goal_reports_no_path_and_recovers():
+    planner = build(seed=7, iterations=800)
+    gx, gy = GOAL
+    walls = {
+        "n": box(gx, gy + 3.0, 3.5, 0.5),
+        "s": box(gx, gy - 3.0, 3.5, 0.5),
+        "e": box(gx + 3.0, gy, 0.5, 3.5),
+        "w": box(gx - 3.0, gy, 0.5, 3.5),
+    }
+    t0 = time.perf_counter()
+    planner.update_obstacles(added=walls)
+    assert planner.status is PlanStatus.NO_PATH
+    assert planner.cost() == np.inf and planner.path().shape == (0, 2)
+    planner.run(300)
+    assert time.perf_counter() - t0 < 10.0
+    assert planner.status is PlanStatus.NO_PATH
+    planner.remove_obstacle("w")
+    assert planner.status is PlanStatus.FOUND
+    assert_matches_dijkstra(planner)
+    assert_path_clear(planner.path(), [walls["n"], walls["s"], walls["e"], *STATIC.values()])
+
+
+def test_fixed_seed_gives_same_tree_and_path():
+    runs = []
+    for _ in range(2):
+        planner = build(seed=8, iterations=500)
+        planner.add_obstacle("x", box(0.0, 0.0, 3.0, 3.0))
+        planner.run(100)
+        runs.append(planner)
+    a, b = runs
+    np.testing.assert_array_equal(a.positions, b.positions)
+    np.testing.assert_array_equal(a.parents, b.parents)
+    np.testing.assert_array_equal(a.g, b.g)
+    np.testing.assert_array_equal(a.path(), b.path())
+    other = build(seed=9, iterations=500)
+    assert not np.array_equal(other.positions[:50], a.positions[:50])
+
+
+def test_robot_moves_along_path_and_retargets_when_cut_off():
+    planner = build(seed=10)
+    path = planner.path()
+    cost = planner.cost()
+    planner.set_robot(path[1])  # reach the first waypoint: v_bot advances
+    np.testing.assert_array_equal(planner.path()[0], path[1])
+    assert planner.cost() == pytest.approx(cost - np.linalg.norm(path[1] - path[0]), abs=1e-9)
+    halfway = 0.5 * (planner.path()[0] + planner.path()[1])
+    planner.set_robot(halfway)
+    target = planner.positions[planner.vbot]
+    # Block the robot's current edge just ahead of it.
+    ahead = halfway + 0.6 * (target - halfway)
+    planner.add_obstacle("ahead", box(ahead[0], ahead[1], 0.2, 0.2))
+    assert planner.status is PlanStatus.FOUND
+    new_path = planner.path()
+    np.testing.assert_array_equal(new_path[0], halfway)
+    assert_path_clear(new_path, [box(ahead[0], ahead[1], 0.2, 0.2), *STATIC.values()])
+
+
+@pytest.mark.parametrize(
+    ("seed", "eps", "delta"), [(11, 0.0, 3.0), (12, 0.3, 3.0), (13, 0.0, 8.0)]
+)
+def test_random_obstacle_and_robot_sequences_stay_exact(seed, eps, delta):
+    rng = np.random.default_rng(seed)
+    planner = build(seed=seed, eps=eps, iterations=700, delta=delta)
+    present = dict(STATIC)
+    for step in range(25):
+        op = rng.choice(["add", "remove", "move", "grow"], p=[0.35, 0.25, 0.2, 0.2])
+        if op == "add":
+            c = rng.uniform(-18, 18, 2)
+            poly = box(c[0], c[1], *rng.uniform(0.3, 4.0, 2))
+            if inside_convex(np.array([planner.robot, GOAL]), poly).any():
+                continue
+            present[f"r{step}"] = poly
+            planner.add_obstacle(f"r{step}", poly)
+        elif op == "remove" and present:
+            oid = sorted(present)[int(rng.integers(len(present)))]
+            del present[oid]
+            planner.remove_obstacle(oid)
+        elif op == "move" and planner.status is PlanStatus.FOUND:
+            path = planner.path()
+            planner.set_robot(path[0] + rng.uniform(0.2, 1.0) * (path[1] - path[0]))
+        else:
+            planner.run(100)
+        if planner.status is PlanStatus.FOUND:
+            assert_matches_dijkstra(planner)
+            assert_path_clear(planner.path(), list(present.values()), spacing=0.02)
+        else:
+            dist, _ = dijkstra_to_goal(planner)
+            assert not planner.robot_edge_free or dist[planner.vbot] == np.inf
+    assert_invariants(planner)
+
+
+def test_moving_an_obstacle_and_batched_updates():
+    planner = build(seed=14)
+    path = planner.path()
+    mid = path[len(path) // 2]
+    planner.add_obstacle("mover", box(mid[0], mid[1], 2.0, 2.0))
+    moved = box(mid[0] + 6.0, mid[1] - 6.0, 2.0, 2.0)
+    planner.add_obstacle("mover", moved)  # same id: a move
+    assert planner.obstacles.ids() == ["s1", "s2", "mover"]
+    assert_matches_dijkstra(planner)
+    assert_path_clear(planner.path(), [moved, *STATIC.values()])
+    grown = box(mid[0] + 6.0, mid[1] - 6.0, 2.6, 2.6)
+    planner.add_obstacle("mover", grown)  # regrown in place: only new blocks
+    gr = planner.graph
+    a = gr.pos[gr.ea[: gr.ne]]
+    b = gr.pos[gr.eb[: gr.ne]]
+    blocked = np.zeros(gr.ne, dtype=bool)
+    for poly in [grown, *STATIC.values()]:
+        blocked |= segments_hit_polygon(a, b, poly)
+    np.testing.assert_array_equal(np.isinf(gr.ecost[: gr.ne]), blocked)
+    assert_matches_dijkstra(planner)
+    extra = box(mid[0], mid[1], 1.0, 1.0)
+    planner.update_obstacles(added={"extra": extra}, removed=["mover", "s1"])
+    assert_matches_dijkstra(planner)
+    assert_path_clear(planner.path(), [extra, STATIC["s2"]])
+    with pytest.raises(KeyError):
+        planner.remove_obstacle("nope")
+    assert_invariants(planner)
+
+
+def test_goal_enclosed_from_the_start_keeps_searching_without_hanging():
+    gx, gy = GOAL
+    ring = {
+        "n": box(gx, gy + 3.0, 3.5, 0.5),
+        "s": box(gx, gy - 3.0, 3.5, 0.5),
+        "e": box(gx + 3.0, gy, 0.5, 3.5),
+        "w": box(gx - 3.0, gy, 0.5, 3.5),
+    }
+    cfg = RRTXConfig(goal=GOAL, bounds=BOUNDS, steer_distance=3.0)
+    planner = RRTX(cfg, np.random.default_rng(15))
+    planner.update_obstacles(added=ring)
+    planner.set_robot(START)
+    planner.run(400)
+    assert planner.status is PlanStatus.SEARCHING
+    assert planner.cost() == np.inf and planner.path().shape == (0, 2)
+    planner.remove_obstacle("s")
+    planner.run(1500)
+    assert planner.status is PlanStatus.FOUND
+    assert_matches_dijkstra(planner)
+    assert_path_clear(planner.path(), [ring["n"], ring["e"], ring["w"]])
