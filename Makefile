@@ -11,8 +11,8 @@ test: setup
 	@$(ENV) python -m pytest
 
 demo: setup
-	@$(ENV) scripts/rrtq run scenarios/plant_only.yaml --out runs/plant-only --overwrite
-	@$(ENV) scripts/rrtq report runs/plant-only/run.mcap
+	@$(ENV) scripts/rrtq run scenarios/rrtqx_paper.yaml --out runs/rrtqx-paper --overwrite
+	@$(ENV) scripts/rrtq report runs/rrtqx-paper/run.mcap
 
 bench: setup
 	@$(ENV) python benchmarks/run_all.py

@@ -127,7 +127,7 @@ def test_channel_metadata_has_qos_and_type_hash(runs):
                                   'avoid_ros_namespace_conventions'}
     latched = yaml.safe_load(by_topic['/obstacles/detected'].metadata['offered_qos_profiles'])
     assert latched[0]['durability'] == 'transient_local'
-    assert yaml.safe_load(by_topic['/odom'].metadata['offered_qos_profiles'])[0][
+    assert yaml.safe_load(by_topic['/clock'].metadata['offered_qos_profiles'])[0][
         'durability'] == 'volatile'
 
 

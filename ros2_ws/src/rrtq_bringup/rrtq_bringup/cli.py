@@ -40,6 +40,8 @@ def _parser() -> argparse.ArgumentParser:
                      help='one process per node (default) or all nodes on one executor')
     run.add_argument('--overwrite', action='store_true',
                      help='replace an existing recording in the output directory')
+    sub.add_parser('plan', help='the RRT^X planner alone on a scenario or Otte file; '
+                   "'rrtq plan --help' for its options", add_help=False)
     rep = sub.add_parser('report', help='figures and summary from a recording alone')
     rep.add_argument('recording', type=pathlib.Path, help='run.mcap of a run')
     rep.add_argument('--out', type=pathlib.Path,
@@ -98,6 +100,10 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if argv[:1] == ['plan']:
+        from rrtq_planner.plan_cli import main as plan_main
+        return plan_main(argv[1:])
     args = _parser().parse_args(argv)
     return {'run': cmd_run, 'report': cmd_report}[args.command](args)
 

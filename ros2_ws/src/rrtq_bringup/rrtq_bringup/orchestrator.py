@@ -129,7 +129,7 @@ class Run:
     def _on_signal(self, signum: int, _frame) -> None:
         self.stop_requested = signal.Signals(signum).name
 
-    def _spin(self, executor, check_children, halt_simulator) -> None:
+    def _spin(self, executor, check_children, supervisor) -> None:
         """Spin until the mission ends, a node fails, a signal arrives, or progress stalls."""
         last_step, last_change = -1, time.monotonic()
         self.first_step_wall: float | None = None
@@ -158,11 +158,14 @@ class Run:
                                         f'no new odometry for {limit:g} s of wall time '
                                         f'(after {self.monitor.steps} steps): the graph stalled')
         self.last_step_wall = time.monotonic()
-        halt_simulator()
-        # Take what is still in flight for the supervisor: the commands of the last steps
-        # may arrive after the odometry that ended the run.
+        supervisor.pause_simulation()
+        # Take what is still in flight: the commands of the last steps may reach the
+        # supervisor after the odometry that ended the run, and every node stays up a
+        # moment so that the recorder gets (and, if need be, has resent) the last steps.
         deadline = time.monotonic() + 2.0
-        while not self.monitor.commands_complete() and time.monotonic() < deadline:
+        settle = time.monotonic() + 0.5
+        while (not self.monitor.commands_complete() and time.monotonic() < deadline) \
+                or time.monotonic() < settle:
             executor.spin_once(timeout_sec=0.02)
 
     # -- processes mode -------------------------------------------------------------------
@@ -186,7 +189,7 @@ class Run:
             for spec in self.graph:
                 if spec.name != 'supervisor':
                     self.children[spec.name] = self._start_process(spec, params_dir, env)
-            self._spin(executor, self._check_children, self._halt_simulator_process)
+            self._spin(executor, self._check_children, supervisor)
         finally:
             self._stop_processes()
             executor.remove_node(supervisor)
@@ -217,16 +220,6 @@ class Run:
                             'exit_code': None, 'log_tail': text.strip().splitlines()[-15:]}
         self.monitor.finish(Outcome.NODE_FAILED, f"node '{where}' raised {type(exc).__name__}")
 
-    def _halt_simulator_process(self) -> None:
-        """Stop stepping at once: the recording ends where the mission ended."""
-        sim = self.children.get('simulator')
-        if sim is not None and sim.poll() is None:
-            sim.send_signal(signal.SIGINT)
-            try:
-                sim.wait(timeout=10.0)
-            except subprocess.TimeoutExpired:
-                sim.kill()
-
     def _check_children(self) -> dict | None:
         for name, proc in self.children.items():
             code = proc.poll()
@@ -244,8 +237,6 @@ class Run:
         for name in order:
             proc = self.children[name]
             if proc.poll() is None:
-                if name == 'recorder':
-                    time.sleep(0.3)   # let the recorder take what is still in flight
                 proc.send_signal(signal.SIGINT)
                 try:
                     proc.wait(timeout=10.0)
@@ -276,8 +267,7 @@ class Run:
                 nodes.append(cls(context=context, parameter_overrides=overrides))
             for node in nodes:
                 executor.add_node(node)
-            simulator = next(n for n in nodes if n.get_name() == 'simulator')
-            self._spin(executor, lambda: None, lambda: executor.remove_node(simulator))
+            self._spin(executor, lambda: None, nodes[0])
         finally:
             # Recorder last, after draining what is still queued for it.
             for node in sorted(nodes, key=lambda n: n.get_name() == 'recorder'):

@@ -7,6 +7,7 @@ from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rrtq_msgs.msg import ControllerState, PlannerStats
+from std_msgs.msg import Empty
 
 from rrtq_bringup.mission import MissionMonitor
 from rrtq_sim import conversions as conv
@@ -25,6 +26,7 @@ class SupervisorNode(Node):
         goal_msg.pose.position.x, goal_msg.pose.position.y = float(goal[0]), float(goal[1])
         goal_msg.pose.orientation.w = 1.0
         self.goal_pub.publish(goal_msg)
+        self.pause_pub = self.create_publisher(Empty, topics.SIMULATOR_PAUSE, qos.LATCHED)
         self.last_odom_ns = -1
         self.create_subscription(Odometry, topics.ODOM, self.on_odom, qos.STREAM)
         self.create_subscription(WrenchStamped, topics.CMD_FORCE, self.on_cmd, qos.STREAM)
@@ -38,6 +40,10 @@ class SupervisorNode(Node):
             return
         self.last_odom_ns = stamp
         self.monitor.on_odometry(stamp * 1e-9, conv.odometry_state(msg)[:2])
+
+    def pause_simulation(self) -> None:
+        """Ask the simulator to stop stepping (the mission is over)."""
+        self.pause_pub.publish(Empty())
 
     def on_cmd(self, msg: WrenchStamped) -> None:
         self.monitor.on_command(conv.stamp_ns(msg.header.stamp) * 1e-9,

@@ -3,10 +3,12 @@
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 # Per-step streams: reliable, with enough depth that a lock-step run at full speed
-# never overwrites a sample a slow reader (the recorder) has not taken yet.
+# never overwrites a sample a slow reader (the recorder) has not taken yet; transient
+# local, so that a reader whose endpoint matches a moment late (discovery between two
+# nodes can finish after the simulator's start-up check) still gets the first steps.
 STREAM = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                     reliability=ReliabilityPolicy.RELIABLE,
-                    durability=DurabilityPolicy.VOLATILE)
+                    durability=DurabilityPolicy.TRANSIENT_LOCAL)
 # State that a late joiner must get: latched (transient local), last value only.
 LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                      reliability=ReliabilityPolicy.RELIABLE,

@@ -14,6 +14,7 @@ import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Empty
 from nav_msgs.msg import Odometry
 from rrtq_msgs.msg import ControllerState, Disturbance, PerceptionStatus
 
@@ -59,6 +60,8 @@ class SimulatorNode(Node):
                                            'time, s (0 = never)', low=0.0))
         self.wait_for = d('wait_for', [''], 'topic:count pairs; the first step waits until '
                           'each topic has that many subscribers', element=str)
+        self.settle_s = d('settle_s', 0.5, 'wall time to wait once the graph is connected, so '
+                          'that discovery between the other nodes completes too, s', low=0.0)
         self.resend_s = d('resend_period_s', 2.0, 'lock-step: republish the current odometry '
                           'if acknowledgements stall this long (wall), s', low=0.01)
 
@@ -80,6 +83,9 @@ class SimulatorNode(Node):
         for key in sorted(set(self.acks) | {'cmd_force', 'controller_state', 'disturbance'}):
             topic, mtype = ACK_TOPICS[key]
             self.create_subscription(mtype, topic, self._input_callback(key), qos.STREAM)
+        self.paused = False
+        self.create_subscription(Empty, topics.SIMULATOR_PAUSE, self._pause, qos.LATCHED)
+        self._ready_since: float | None = None
         self._gate = self.create_timer(0.02, self._try_start)
 
     # -- inputs ---------------------------------------------------------------
@@ -131,12 +137,22 @@ class SimulatorNode(Node):
             if not item:
                 continue
             topic, _, count = item.rpartition(':')
-            if self.count_subscribers(topic) < int(count):
+            # Own publishers: readers actually matched to them (the graph's counts can run
+            # ahead of endpoint matching). Other topics: what discovery reports.
+            own = {topics.ODOM: self.odom_pub, topics.CLOCK: self.clock_pub}.get(topic)
+            seen = own.get_subscription_count() if own else self.count_subscribers(topic)
+            if seen < int(count):
                 return False
-        return True
+        return all(self.count_publishers(ACK_TOPICS[key][0]) >= 1 for key in self.acks)
 
     def _try_start(self) -> None:
         if not self._graph_ready():
+            self._ready_since = None
+            return
+        now = time.monotonic()
+        if self._ready_since is None:
+            self._ready_since = now
+        if now - self._ready_since < self.settle_s:
             return
         self._gate.cancel()
         self.started = True
@@ -147,9 +163,14 @@ class SimulatorNode(Node):
         else:
             self.create_timer(self.resend_s, self._resend_if_stalled)
 
+    def _pause(self, _msg: Empty) -> None:
+        """The mission is over: stop stepping, but stay up so that every reader can
+        still take (and have resent) the last steps."""
+        self.paused = True
+
     def advance(self) -> None:
         """One exact zero-order-hold step with the held force and disturbance."""
-        if self.duration_ns and self.now_ns >= self.duration_ns:
+        if self.paused or (self.duration_ns and self.now_ns >= self.duration_ns):
             return
         anchor = self.anchor if self.anchor_mode == 'leg_target' else np.zeros(2)
         self.x = self.plant.step(self.x, self.u, self.d, anchor)
