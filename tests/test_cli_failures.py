@@ -33,6 +33,8 @@ BAD = {
                     'obstacles[0].polygon'),
     'start inside an obstacle': (GOOD.replace('start: [-5.0, -5.0]', 'start: [1.0, 1.0]'),
                                  'start'),
+    'goal inside an obstacle': (GOOD.replace('goal: [10.0, 10.0]', 'goal: [1.0, 1.5]'),
+                                'goal'),
     'goal outside the bounds': (GOOD.replace('goal: [10.0, 10.0]', 'goal: [30.0, 10.0]'),
                                 'goal'),
     'bad enum value': (GOOD.replace('model: rover', 'model: tank'), 'plant.model'),

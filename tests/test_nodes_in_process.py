@@ -190,3 +190,63 @@ def test_recorder_gets_latched_messages_published_before_it_started(ros, tmp_pat
         got.setdefault(channel.topic, []).append(decoded)
     assert [o.id for o in got['/obstacles/detected'][0].obstacles] == ['a']
     assert [m.pose.pose.position.x for m in got['/odom']] == [float(k) for k in range(50)]
+
+
+def learning_controller(context, **extra):
+    from rrtq_controller.controller_node import ControllerNode
+    return ControllerNode(context=context, parameter_overrides=params(
+        variant='nominal', M=[10.0], R=[0.02], initial_gain=[40.0, 0.0, 30.0, 0.0, 0.0, 40.0, 0.0, 30.0],
+        probing_std=5.0, **extra))
+
+
+def test_controller_rejects_non_finite_odometry_without_learning_from_it(ros):
+    from nav_msgs.msg import Path
+    from geometry_msgs.msg import PoseStamped
+    context, executor, _ = ros
+    node = learning_controller(context)
+    driver = __import__('rclpy').create_node('driver', context=context)
+    executor.add_node(node)
+    executor.add_node(driver)
+    cmds = Collector(driver, WrenchStamped, '/cmd_force', qos.STREAM)
+    odom_pub = driver.create_publisher(Odometry, '/odom', qos.STREAM)
+    plan_pub = driver.create_publisher(Path, '/plan', qos.LATCHED)
+    plan = Path()
+    plan.poses = [PoseStamped()]
+    plan.poses[0].pose.position.x = 3.0
+    plan_pub.publish(plan)
+    assert spin_until(executor, lambda: node.count_publishers('/odom') >= 1, 10.0)
+    for k in range(5):
+        odom_pub.publish(conv.odometry_msg(k * 50_000_000, np.zeros(4)))
+    wait_for_messages(executor, cmds, 5)
+    weights = node.driver.controller.critic_weights.copy()
+    odom_pub.publish(conv.odometry_msg(5 * 50_000_000, np.array([np.nan, 0.0, 0.0, 0.0])))
+    wait_for_messages(executor, cmds, 6)
+    last = cmds.messages[-1].wrench.force
+    assert (last.x, last.y) == (0.0, 0.0)
+    assert np.array_equal(node.driver.controller.critic_weights, weights)
+    assert np.all(np.isfinite(node.driver.controller.actor_weights))
+
+
+def test_controller_commands_zero_when_odometry_goes_stale(ros):
+    from nav_msgs.msg import Path
+    from geometry_msgs.msg import PoseStamped
+    context, executor, _ = ros
+    node = learning_controller(context, stale_timeout_s=0.3, probing_decay=1.0)
+    driver = __import__('rclpy').create_node('driver', context=context)
+    executor.add_node(node)
+    executor.add_node(driver)
+    cmds = Collector(driver, WrenchStamped, '/cmd_force', qos.STREAM)
+    odom_pub = driver.create_publisher(Odometry, '/odom', qos.STREAM)
+    plan_pub = driver.create_publisher(Path, '/plan', qos.LATCHED)
+    plan = Path()
+    plan.poses = [PoseStamped()]
+    plan.poses[0].pose.position.x = 3.0
+    plan_pub.publish(plan)
+    assert spin_until(executor, lambda: node.count_publishers('/odom') >= 1
+                      and 'plan' in node.latest, 10.0)
+    odom_pub.publish(conv.odometry_msg(0, np.zeros(4)))
+    wait_for_messages(executor, cmds, 1)
+    assert abs(cmds.messages[0].wrench.force.x) > 1.0      # pushing toward x = 3
+    spin_until(executor, lambda: False, 1.0)                # no odometry for 1 s
+    assert len(cmds) >= 3
+    assert all((m.wrench.force.x, m.wrench.force.y) == (0.0, 0.0) for m in cmds.messages[1:])

@@ -22,7 +22,8 @@ x̄_k, the held u_k and d_k determine the whole trajectory of the true plant, so
 running cost is integrated exactly by Van Loan's matrix exponential,
 ½∫ zᵀ diag(M, R, 0) z dt = ½ z_kᵀ Q_d z_k with z = (x̄, u, d, 1). ``'trapezoid'``
 uses the samples only: the trapezoidal rule on x̄ᵀMx̄ plus u_kᵀRu_k Δt (exact for a held
-u); its relative error is O(Δt²) (~1e-3 at Δt = 0.05 s on the spring-free rover).
+u); its error is O(Δt²) (per leg within 5e-4 of the exact value on the spring-free
+rover at Δt = 0.05 s, scenarios/rover_no_spring.yaml).
 The residual between the recorded x̄_k+1 and the plant's prediction from (x̄_k, u_k, d_k)
 is reported per leg, so a recording whose timing does not match the assumption shows.
 
@@ -43,6 +44,8 @@ Gain error: with the actor weights Ŵa ((L n) x m) published every step and the 
 basis φ(τ) = exp(−λ_l τ) of :class:`rrtq_controller.config.ControllerConfig`, the learned
 gain is K̂(τ) = −Σ_l φ_l(τ) Ŵa,lᵀ (û = Ŵaᵀ(φ(τ)⊗x̄) = −K̂x̄); per leg the mean over its
 steps of ‖K̂(τ_k) − R⁻¹BᵀP(τ_k)‖_F / ‖R⁻¹BᵀP(τ_k)‖_F.
+
+``python -m rrtq_bringup.leg_costs RUN.mcap [--json]`` prints the table (or the summary).
 """
 
 from __future__ import annotations

@@ -68,6 +68,7 @@ class MissionMonitor:
         self.controller_step_ms: list[float] = []
         self.replan_ms: list[float] = []
         self.replans = 0
+        self.no_path_since: float | None = None
 
     def clearance(self, position: np.ndarray, t: float) -> float:
         """Distance from the robot's disc to the nearest obstacle existing at ``t``."""
@@ -99,8 +100,19 @@ class MissionMonitor:
             if self.config.stop_at_goal:
                 self.finish(Outcome.GOAL_REACHED, f'goal reached at t={t:.2f} s')
         elif t >= self.config.duration - 1e-9:
-            self.finish(Outcome.DURATION, f'duration {self.config.duration:g} s elapsed')
+            reason = f'duration {self.config.duration:g} s elapsed'
+            if self.no_path_since is not None:
+                reason += (f'; the planner has had no path to the goal since '
+                           f't={self.no_path_since:.2f} s (goal cut off)')
+            self.finish(Outcome.DURATION, reason)
         return self.outcome
+
+    def on_plan_status(self, t: float, has_path: bool) -> None:
+        """Track since when the planner has had no path (for the failure reason)."""
+        if has_path:
+            self.no_path_since = None
+        elif self.no_path_since is None:
+            self.no_path_since = t
 
     def on_command(self, t: float, u: np.ndarray) -> None:
         """Record the command of the step at ``t`` (a repeat of a step replaces it)."""
@@ -143,6 +155,7 @@ class MissionMonitor:
             'commands': len(self.commands),
             'min_clearance_m': None if math.isinf(self.min_clearance) else self.min_clearance,
             'replans': self.replans,
+            'no_path_since_s': self.no_path_since,
             'replan_ms': _percentiles(self.replan_ms, (50, 95, 100)),
             'controller_step_ms': _percentiles(self.controller_step_ms, (50, 95)),
         }

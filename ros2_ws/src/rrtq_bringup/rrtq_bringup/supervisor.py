@@ -53,6 +53,8 @@ class SupervisorNode(Node):
         self.monitor.controller_step_ms.append(msg.step_ms)
 
     def on_stats(self, msg: PlannerStats) -> None:
+        self.monitor.on_plan_status(conv.stamp_ns(msg.header.stamp) * 1e-9,
+                                    msg.status == PlannerStats.STATUS_FOUND)
         if msg.replans > self.monitor.replans:
             self.monitor.replans = msg.replans
             self.monitor.replan_ms.append(msg.last_repair_ms)

@@ -217,3 +217,48 @@ def test_steps_without_a_plan_belong_to_no_leg():
     assert len(table.rows) == len(plain.rows)
     assert np.allclose(table.column('ratio'), plain.column('ratio'))
     assert np.allclose(table.column('start_time'), plain.column('start_time'))
+
+
+def test_a_run_of_the_learning_driver_is_read_as_the_driver_saw_it():
+    """The driver's own outputs (as /controller/state carries them) give its legs and gains."""
+    from rrtq_controller.config import ControllerConfig
+    from rrtq_controller.driver import LearningDriver
+
+    sc = scenario(0.0)
+    ctl = sc.controller
+    pd = ((40.0, 0.0, 30.0, 0.0), (0.0, 40.0, 0.0, 30.0))
+    driver = LearningDriver(ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=pd,
+                                             probing_std=5.0), 4, 2, 0,
+                            np.random.default_rng(3))
+    plant = Plant(sc.plant.A, sc.plant.B, None, ctl.dt, sc.plant.force_limit)
+    sol = solve_riccati(sc.plant.A, sc.plant.B, ctl.M, ctl.R, ctl.P_T, ctl.horizon)
+    x = np.zeros(4)
+    driver.set_plan(WAYPOINTS, x, 0.0)
+    outs, xs, errs = [], [], {}
+    for k in range(900):
+        t = k * ctl.dt
+        out = driver.step(t, x)
+        K = sol.gain(out.time_to_go)
+        errs.setdefault(out.leg_index, []).append(
+            np.linalg.norm(driver.controller.gain(out.time_to_go) - K) / np.linalg.norm(K))
+        outs.append(out)
+        xs.append(x.copy())
+        x = plant.step(x, out.u, None, out.leg_target)
+    t = ctl.dt * np.arange(len(outs))
+    empty = np.zeros(0)
+    data = RunData(
+        odom_t=np.append(t, t[-1] + ctl.dt), odom_x=np.vstack(xs + [x]), cmd_t=t,
+        cmd_u=np.array([o.u for o in outs]), dist_t=empty, dist_d=np.zeros((0, 1)), state_t=t,
+        leg_index=np.array([o.leg_index for o in outs]),
+        leg_target=np.array([o.leg_target for o in outs]), d0=np.array([o.d0 for o in outs]),
+        d=np.array([o.d for o in outs]), critic_w=[o.critic_weights for o in outs],
+        actor_w=[o.actor_weights for o in outs], disturbance_w=[empty] * len(outs),
+        safety_t=empty, d_rob=empty, d_rob_max=empty, clearance=empty, truth=[], detected=[],
+        augmented=[], plans=[], tree_segments=None, goal=None, topics={})
+    table = leg_table(data, sc)
+    d0_at_start = {o.leg_start_time: o.d0 for o in outs}
+    assert len(table.rows) == len(d0_at_start) >= 4
+    assert np.allclose(table.column('start_time'), sorted(d0_at_start))
+    assert np.allclose(table.column('d0'), [d0_at_start[s] for s in sorted(d0_at_start)])
+    assert np.all(table.column('ratio') >= 1.0 - 1e-9)
+    assert np.allclose(table.column('gain_error'), [np.mean(errs[r.index]) for r in table.rows])

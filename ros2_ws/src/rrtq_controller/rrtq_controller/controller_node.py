@@ -85,6 +85,12 @@ class ControllerNode(Node):
                                  qos.STREAM)
         self.create_subscription(Disturbance, topics.DISTURBANCE, self._filer('disturbance'),
                                  qos.STREAM)
+        self.stale_after = d('stale_timeout_s', 0.5, 'paced mode: wall time without odometry '
+                             'after which the controller commands zero force, s', low=0.0)
+        self.last_odom_wall: float | None = None
+        self.stale = False
+        if not self.lockstep:
+            self.create_timer(0.05, self._watch_odometry)
 
     @staticmethod
     def _config(d, variant: str, n: int, m: int, horizon: float, dt: float,
@@ -125,6 +131,10 @@ class ControllerNode(Node):
             if not self.lockstep:
                 self.latest[key] = msg
                 if key == 'odom':
+                    self.last_odom_wall = time.monotonic()
+                    if self.stale:
+                        self.stale = False
+                        self.get_logger().info('odometry is back: control resumes')
                     self.process(stamp, msg, self.latest.get('plan'),
                                  self.latest.get('disturbance'))
                 return
@@ -133,6 +143,22 @@ class ControllerNode(Node):
                 self.process(step['stamp_ns'], step['odom'], step.get('plan'),
                              step.get('disturbance'))
         return callback
+
+    def _watch_odometry(self) -> None:
+        """Paced mode: like Nav2's collision monitor on a timed-out source, stop pushing
+        when the odometry has gone stale (the state the command was for is unknown)."""
+        if self.last_odom_wall is None or self.last is None:
+            return
+        age = time.monotonic() - self.last_odom_wall
+        if age <= self.stale_after:
+            return
+        if not self.stale:
+            self.stale = True
+            self.get_logger().warning(f'no odometry for {age:.2f} s (limit '
+                                      f'{self.stale_after:g} s): commanding zero force')
+        cmd = WrenchStamped()
+        cmd.header = self.last[2].header
+        self.cmd_pub.publish(cmd)
 
     # -- the step -----------------------------------------------------------------------
     def process(self, stamp: int, odom: Odometry, plan: Path | None,

@@ -58,7 +58,15 @@ class LearningDriver:
         planner improved or repaired what lies beyond it); otherwise a new leg starts
         from the current state toward the plan's first waypoint.
         """
-        if self.legs.follow_plan(waypoints, np.asarray(x, dtype=float), t):
+        x = np.asarray(x, dtype=float)
+        points = np.asarray(waypoints, dtype=float).reshape(-1, 2)
+        if not len(points):
+            # No path to the goal: hold where the robot is (a leg to its own position)
+            # until the planner finds one again.
+            if self.legs.leg is not None and np.allclose(self.legs.leg.target[:2], x[:2]):
+                return
+            points = x[None, :2].copy()
+        if self.legs.follow_plan(points, x, t):
             assert self.legs.leg is not None
             self.controller.start_leg(self.legs.x_bar(x), t)
 

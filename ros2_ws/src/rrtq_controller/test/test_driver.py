@@ -49,3 +49,18 @@ def test_driver_walks_the_waypoints_to_the_goal():
     assert targets == {(4.0, 0.0), (4.0, 4.0)}
     assert np.linalg.norm(x[:2] - [4, 4]) < 0.3
     assert out.leg_index >= 1 and out.critic_weights.size > 0
+
+
+def test_an_empty_plan_holds_the_robot_where_it_is():
+    dt = 0.05
+    phi, gam = zoh(dt)
+    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=((40, 0, 30, 0), (0, 40, 0, 30)),
+                              probing_std=0.0)
+    driver = LearningDriver(config, 4, 2, 1, np.random.default_rng(1))
+    x = np.array([1.0, 2.0, 0.8, -0.5])              # moving when the path is lost
+    driver.set_plan([], x, 0.0)
+    for k in range(int(10 / dt)):
+        out = driver.step(k * dt, x)
+        x = phi @ x + gam @ out.u
+    assert np.allclose(out.leg_target, [1.0, 2.0])
+    assert np.linalg.norm(x[2:]) < 0.05 and np.linalg.norm(x[:2] - [1.0, 2.0]) < 0.3

@@ -26,7 +26,7 @@ from rrtq_sim import qos, topics
 from rrtq_sim.lockstep import Requirement, StepInputs, seconds_to_ns
 from rrtq_sim.params import declare, spin_node
 
-STATUS = {PlanStatus.SEARCHING: PlannerStats.STATUS_NO_GOAL, PlanStatus.FOUND:
+STATUS = {PlanStatus.SEARCHING: PlannerStats.STATUS_SEARCHING, PlanStatus.FOUND:
           PlannerStats.STATUS_FOUND, PlanStatus.NO_PATH: PlannerStats.STATUS_NO_PATH}
 
 
