@@ -407,7 +407,9 @@ def evaluate(path: str | pathlib.Path, quadrature: str = 'zoh') -> LegTable:
     raw = embedded_scenario(path)
     if not raw:
         raise ValueError(f'{path}: no embedded scenario (metadata record rrtq_scenario)')
-    return leg_table(read_run(path), parse_scenario(raw, str(path)), quadrature)
+    data = read_run(path)
+    rates = tuple(data.time_rates) if data.time_rates else DEFAULT_TIME_RATES
+    return leg_table(data, parse_scenario(raw, str(path)), quadrature, rates)
 
 
 def summary(table: LegTable, last: int = 10) -> dict[str, Any]:

@@ -189,6 +189,27 @@ def plot_timeseries(data: RunData, scenario: dict, path: pathlib.Path) -> None:
     plt.close(fig)
 
 
+def plot_legs(table, path: pathlib.Path) -> None:
+    """Per leg: cost against the Riccati optimum, and the learned gain's error."""
+    index = table.column('index')
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
+    top.semilogy(index, table.column('ratio'), 'o-', ms=3)
+    top.axhline(1.05, color='tab:red', ls=':', label='5 % above the optimum')
+    top.set_ylabel('leg cost / optimum')
+    top.legend(fontsize=8)
+    bottom.plot(index, table.column('gain_error'), 'o-', ms=3, color='tab:orange')
+    bottom.axhline(0.1, color='tab:red', ls=':', label='10 %')
+    bottom.set_ylabel('|K̂ - K*| / |K*|')
+    bottom.set_xlabel('leg')
+    bottom.legend(fontsize=8)
+    for ax in (top, bottom):
+        ax.grid(alpha=0.3)
+    fig.suptitle('learned control against the finite-horizon Riccati optimum', fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = None) -> dict:
     """Write the figures and summary for ``recording``; return the summary."""
     recording = pathlib.Path(recording)
@@ -199,5 +220,16 @@ def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = N
     summary = summarise(data, scenario)
     plot_map(data, scenario, out / 'map.png')
     plot_timeseries(data, scenario, out / 'timeseries.png')
+    if data.critic_w and any(w.size for w in data.critic_w):
+        from rrtq_bringup.leg_costs import leg_table, summary as leg_summary, DEFAULT_TIME_RATES
+        from rrtq_sim.scenario import parse_scenario
+        table = leg_table(data, parse_scenario(scenario, str(recording)),
+                          time_rates=tuple(data.time_rates) or DEFAULT_TIME_RATES)
+        if table.rows:
+            legs = leg_summary(table)
+            summary['legs_vs_optimum'] = {k: legs[k] for k in (
+                'legs', 'median_ratio_last10', 'median_ratio_last10_complete',
+                'median_gain_error_last10', 'ratios_last10')}
+            plot_legs(table, out / 'legs.png')
     (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
     return summary

@@ -52,6 +52,7 @@ class RunData:
     tree_segments: np.ndarray | None                             # last tree: (E, 2, 2)
     goal: np.ndarray | None
     topics: dict[str, int]
+    time_rates: list[float] = dataclasses.field(default_factory=list)   # controller's basis
 
 
 def read_run(path: str | pathlib.Path) -> RunData:
@@ -114,7 +115,8 @@ def read_run(path: str | pathlib.Path) -> RunData:
         d_rob_max=np.array([m.d_rob_max for m in safety]),
         clearance=np.array([m.min_clearance for m in safety]),
         truth=series['truth'], detected=series['detected'], augmented=series['augmented'],
-        plans=series['plan'], tree_segments=_tree_segments(tree), goal=goal, topics=topics)
+        plans=series['plan'], tree_segments=_tree_segments(tree), goal=goal, topics=topics,
+        time_rates=list(getattr(states[-1], 'time_rates', [])) if states else [])
 
 
 def _tree_segments(msg) -> np.ndarray | None:

@@ -192,6 +192,8 @@ class ControllerNode(Node):
             state.leg_target = Point(x=float(out.leg_target[0]), y=float(out.leg_target[1]))
             state.d0, state.d, state.rho = out.d0, out.d, self.rho
             state.probing_noise = _floats(out.probing)
+            if isinstance(self.driver, LearningDriver):
+                state.time_rates = _floats(self.driver.controller.config.time_rates)
             state.critic_weights = _floats(out.critic_weights)
             state.actor_weights = _floats(out.actor_weights)
             state.disturbance_weights = _floats(out.disturbance_weights)

@@ -21,6 +21,8 @@ from shapely.geometry import Polygon
 
 # Vertices per quarter circle of the grown polygons' rounded corners.
 QUAD_SEGMENTS = 8
+# m: how far outside a grown obstacle the robot is kept when the margin is capped.
+KEEP_OUT = 0.05
 
 
 def kinodynamic_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
@@ -88,11 +90,25 @@ class SafetyMonitor:
         return (self.published_margin is None
                 or self.margin >= self.published_margin + self.config.growth_threshold)
 
-    def augmented(self, obstacles: Sequence[tuple[str, np.ndarray]]
-                  ) -> list[tuple[str, np.ndarray]]:
-        """Every obstacle grown by the current margin; records the margin as published."""
+    def augmented(self, obstacles: Sequence[tuple[str, np.ndarray]],
+                  position: npt.ArrayLike | None = None) -> list[tuple[str, np.ndarray]]:
+        """Every obstacle grown by the current margin; records the margin as published.
+
+        With the robot's ``position``, an obstacle is grown at most to ``KEEP_OUT`` short of
+        the robot: a margin that grew while the robot was near an obstacle must not swallow
+        the robot, or the planner, which plans from the robot's position, finds no way out.
+        (Inside the true obstacle grown by the robot radius is a collision, not this case.)
+        """
         self.published_margin = self.margin
-        return [(oid, augment(poly, self.margin)) for oid, poly in obstacles]
+        out = []
+        for oid, poly in obstacles:
+            margin = self.margin
+            if position is not None:
+                gap = float(shapely.Polygon(poly).distance(shapely.Point(
+                    np.asarray(position, dtype=float)[:2])))
+                margin = min(margin, max(gap - KEEP_OUT, 0.0))
+            out.append((oid, augment(poly, margin)))
+        return out
 
 
 def clearance(position: npt.ArrayLike, polygons: Sequence[np.ndarray],

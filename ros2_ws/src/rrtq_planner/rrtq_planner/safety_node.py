@@ -20,6 +20,7 @@ from rrtq_sim import conversions as conv
 from rrtq_sim import qos, topics
 from rrtq_sim.lockstep import Requirement, StepInputs, seconds_to_ns
 from rrtq_sim.params import declare, spin_node
+from rrtq_sim.obstacles import point_in_polygon
 from rrtq_sim.perception import Perception
 from rrtq_sim.scenario import load_scenario
 
@@ -52,6 +53,7 @@ class SafetyNode(Node):
         self.latest: dict[str, object] = {}
         self.detected_stamp = -1
         self.detected: list[tuple[str, np.ndarray]] = []
+        self.published: list[tuple[str, np.ndarray]] = []
         self.augmented_stamp = 0
         self.collided = False
         self.last: SafetyStatus | None = None
@@ -99,10 +101,12 @@ class SafetyNode(Node):
             leg_index = state.leg_index
             grown = self.monitor.update([state.leg_start.x, state.leg_start.y],
                                         [state.leg_target.x, state.leg_target.y], position)
-        if changed or grown or self.monitor.published_margin is None:
+        swallowed = any(point_in_polygon(position, poly) for _, poly in self.published)
+        if changed or grown or swallowed or self.monitor.published_margin is None:
             self.augmented_stamp = stamp
-            self.aug_pub.publish(conv.obstacle_array_msg(
-                stamp, self.monitor.augmented(self.detected), self.monitor.margin))
+            self.published = self.monitor.augmented(self.detected, position)
+            self.aug_pub.publish(conv.obstacle_array_msg(stamp, self.published,
+                                                         self.monitor.margin))
         existing = [s for s in self.truth if Perception.exists(s, t)]
         gap, index = clearance(position, [s.polygon for s in existing], self.robot_radius)
         if gap < 0.0 and not self.collided:

@@ -72,3 +72,15 @@ def test_clearance_signed_and_nearest():
     inside, _ = clearance([1.0, 0.4], [SQUARE], robot_radius=0.0)
     assert inside == pytest.approx(-0.4)
     assert clearance([0, 0], [], 1.0) == (math.inf, -1)
+
+
+def test_augmentation_never_swallows_the_robot():
+    monitor = SafetyMonitor(SafetyConfig(robot_radius=0.5))
+    monitor.update([0, 0], [10, 0], [1, 1.0])                   # D_rob = 1: margin 1.5
+    robot = np.array([1.0, 1.6])                                # 0.6 m above the square
+    (_, near), = monitor.augmented([('a', SQUARE)], robot)
+    (_, free), = monitor.augmented([('b', SQUARE + [20.0, 0.0])], robot)
+    assert not shapely.Polygon(near).covers(shapely.Point(robot))
+    assert shapely.Polygon(near).distance(shapely.Point(robot)) == pytest.approx(0.05, abs=0.01)
+    assert shapely.Polygon(free).hausdorff_distance(
+        shapely.Polygon(augment(SQUARE + [20.0, 0.0], 1.5))) < 1e-9   # far ones: full margin
