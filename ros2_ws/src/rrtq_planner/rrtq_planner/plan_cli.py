@@ -38,6 +38,7 @@ from shapely.geometry import Polygon
 
 from .geometry import ObstacleMap
 from .rrtx import RRTX, PlanStatus, RRTXConfig
+from .safety import grow_polygon
 from .shortcut import Shortener, path_length
 
 EXIT_OK = 0
@@ -211,40 +212,6 @@ class PlanResult:
             'path': [[float(x), float(y)] for x, y in self.path],
             'cost': self.cost, 'rrtx_cost': self.rrtx_cost, 'nodes': self.nodes,
             'iterations': self.iterations, 'time_s': round(self.time_s, 4)})
-
-
-def grow_polygon(polygon: np.ndarray, radius: float, sides: int = DISC_SIDES) -> np.ndarray:
-    """A polygon containing ``polygon`` ⊕ disc(``radius``), at most 0.5 % larger.
-
-    The Minkowski sum with a disc is the polygon, plus each edge swept along its
-    normal by ±radius (a rectangle), plus a disc at each vertex.  Each disc is
-    replaced by the regular ``sides``-gon whose edges are tangent to it, which
-    contains it, and the pieces are united.  (``shapely``'s ``buffer`` does not
-    bound its chords: GEOS spans up to about two angle quanta with one chord, so
-    scaling its distance by a fixed factor is not reliably conservative.)
-
-    Returns the exterior ring (k, 2) without the closing vertex; a hole (free
-    space enclosed by the obstacle) is filled, which no path can use anyway.
-    """
-    poly = np.asarray(polygon, dtype=float)
-    if radius <= 0.0:
-        return poly.copy()
-    nxt = np.roll(poly, -1, axis=0)
-    edge = nxt - poly
-    length = np.linalg.norm(edge, axis=1, keepdims=True)
-    normal = np.column_stack((-edge[:, 1], edge[:, 0])) / np.where(length > 0, length, 1.0)
-    off = radius * normal
-    rects = np.stack((poly + off, nxt + off, nxt - off, poly - off), axis=1)
-    angles = 2.0 * np.pi * (np.arange(sides) + 0.5) / sides
-    ring = (radius / np.cos(np.pi / sides)) * np.column_stack((np.cos(angles), np.sin(angles)))
-    discs = poly[:, None, :] + ring[None, :, :]
-    pieces = [Polygon(poly).buffer(0)]
-    pieces += list(shapely.polygons(rects[length[:, 0] > 0]))
-    pieces += list(shapely.polygons(discs))
-    union = shapely.union_all(pieces)
-    if union.geom_type != 'Polygon':
-        union = max(getattr(union, 'geoms', [union]), key=lambda g: g.area)
-    return np.asarray(union.exterior.coords, dtype=float)[:-1]
 
 
 def grow(polygons: Sequence[np.ndarray], radius: float) -> list[np.ndarray]:

@@ -19,8 +19,6 @@ import numpy.typing as npt
 import shapely
 from shapely.geometry import Polygon
 
-# Vertices per quarter circle of the grown polygons' rounded corners.
-QUAD_SEGMENTS = 8
 # m: how far outside a grown obstacle the robot is kept when the margin is capped.
 KEEP_OUT = 0.05
 
@@ -43,20 +41,43 @@ def kinodynamic_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
     return abs(x0bar[0] * xbar[1] - x0bar[1] * xbar[0]) / d0
 
 
-def augment(polygon: npt.ArrayLike, margin: float) -> np.ndarray:
-    """The obstacle ⊕ a disc of radius ``margin`` (eq. 7), as a polygon that contains it.
+def grow_polygon(polygon: np.ndarray, radius: float, sides: int = 32) -> np.ndarray:
+    """A polygon containing ``polygon`` ⊕ disc(``radius``), at most 0.5 % larger.
 
-    shapely's buffer approximates each rounded corner by chords, which lie inside the
-    true arc; buffering by margin / cos(π / (4 q)) pushes the chords out until they are
-    tangent to it, so the returned polygon contains the exact Minkowski sum (and exceeds
-    it by at most margin·(1/cos(π/(4q)) − 1), 0.5 % at q = 8).
+    The Minkowski sum with a disc is the polygon, plus each edge swept along its
+    normal by ±radius (a rectangle), plus a disc at each vertex.  Each disc is
+    replaced by the regular ``sides``-gon whose edges are tangent to it, which
+    contains it, and the pieces are united.  (``shapely``'s ``buffer`` does not
+    bound its chords: GEOS spans up to about two angle quanta with one chord, so
+    scaling its distance by a fixed factor is not reliably conservative.)
+
+    Returns the exterior ring (k, 2) without the closing vertex; a hole (free
+    space enclosed by the obstacle) is filled, which no path can use anyway.
     """
-    vertices = np.asarray(polygon, dtype=float)
-    if margin <= 0.0:
-        return vertices.copy()
-    grown = Polygon(vertices).buffer(margin / math.cos(math.pi / (4 * QUAD_SEGMENTS)),
-                                     quad_segs=QUAD_SEGMENTS, join_style='round')
-    return np.asarray(grown.exterior.coords, dtype=float)[:-1]
+    poly = np.asarray(polygon, dtype=float)
+    if radius <= 0.0:
+        return poly.copy()
+    nxt = np.roll(poly, -1, axis=0)
+    edge = nxt - poly
+    length = np.linalg.norm(edge, axis=1, keepdims=True)
+    normal = np.column_stack((-edge[:, 1], edge[:, 0])) / np.where(length > 0, length, 1.0)
+    off = radius * normal
+    rects = np.stack((poly + off, nxt + off, nxt - off, poly - off), axis=1)
+    angles = 2.0 * np.pi * (np.arange(sides) + 0.5) / sides
+    ring = (radius / np.cos(np.pi / sides)) * np.column_stack((np.cos(angles), np.sin(angles)))
+    discs = poly[:, None, :] + ring[None, :, :]
+    pieces = [Polygon(poly).buffer(0)]
+    pieces += list(shapely.polygons(rects[length[:, 0] > 0]))
+    pieces += list(shapely.polygons(discs))
+    union = shapely.union_all(pieces)
+    if union.geom_type != 'Polygon':
+        union = max(getattr(union, 'geoms', [union]), key=lambda g: g.area)
+    return np.asarray(union.exterior.coords, dtype=float)[:-1]
+
+
+def augment(polygon: npt.ArrayLike, margin: float) -> np.ndarray:
+    """The obstacle ⊕ a disc of radius ``margin`` (RRT-QX eq. 7), as a polygon containing it."""
+    return grow_polygon(np.asarray(polygon, dtype=float), margin)
 
 
 @dataclasses.dataclass(frozen=True)
