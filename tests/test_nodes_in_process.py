@@ -199,11 +199,10 @@ def learning_controller(context, **extra):
         probing_std=5.0, **extra))
 
 
-def test_controller_rejects_non_finite_odometry_without_learning_from_it(ros):
-    from nav_msgs.msg import Path
+def drive_with_plan(context, executor, node):
+    """A driver node that latches a one-waypoint plan to (3, 0); (commands, odometry pub)."""
     from geometry_msgs.msg import PoseStamped
-    context, executor, _ = ros
-    node = learning_controller(context)
+    from nav_msgs.msg import Path
     driver = __import__('rclpy').create_node('driver', context=context)
     executor.add_node(node)
     executor.add_node(driver)
@@ -214,6 +213,13 @@ def test_controller_rejects_non_finite_odometry_without_learning_from_it(ros):
     plan.poses = [PoseStamped()]
     plan.poses[0].pose.position.x = 3.0
     plan_pub.publish(plan)
+    return cmds, odom_pub
+
+
+def test_controller_rejects_non_finite_odometry_without_learning_from_it(ros):
+    context, executor, _ = ros
+    node = learning_controller(context)
+    cmds, odom_pub = drive_with_plan(context, executor, node)
     assert spin_until(executor, lambda: node.count_publishers('/odom') >= 1, 10.0)
     for k in range(5):
         odom_pub.publish(conv.odometry_msg(k * 50_000_000, np.zeros(4)))
@@ -228,20 +234,9 @@ def test_controller_rejects_non_finite_odometry_without_learning_from_it(ros):
 
 
 def test_controller_commands_zero_when_odometry_goes_stale(ros):
-    from nav_msgs.msg import Path
-    from geometry_msgs.msg import PoseStamped
     context, executor, _ = ros
     node = learning_controller(context, stale_timeout_s=0.3, probing_decay=1.0)
-    driver = __import__('rclpy').create_node('driver', context=context)
-    executor.add_node(node)
-    executor.add_node(driver)
-    cmds = Collector(driver, WrenchStamped, '/cmd_force', qos.STREAM)
-    odom_pub = driver.create_publisher(Odometry, '/odom', qos.STREAM)
-    plan_pub = driver.create_publisher(Path, '/plan', qos.LATCHED)
-    plan = Path()
-    plan.poses = [PoseStamped()]
-    plan.poses[0].pose.position.x = 3.0
-    plan_pub.publish(plan)
+    cmds, odom_pub = drive_with_plan(context, executor, node)
     assert spin_until(executor, lambda: node.count_publishers('/odom') >= 1
                       and 'plan' in node.latest, 10.0)
     odom_pub.publish(conv.odometry_msg(0, np.zeros(4)))

@@ -43,13 +43,6 @@ class Leg:
     """D0 = ‖x0 - x_r‖ (RRT-QX (4))."""
 
 
-def kinodynamic_distance(x0_bar: Array, x_bar: Array, d0: float) -> float:
-    """D_rob = |x̄0 × x̄| / D0 on the position plane (RRT-QX (6))."""
-    if d0 <= 0:
-        return 0.0
-    return abs(float(x0_bar[0] * x_bar[1] - x0_bar[1] * x_bar[0])) / d0
-
-
 class LegSequencer:
     """Walk a plan's waypoints with the terminal-state evaluation D <= ρ D0.
 

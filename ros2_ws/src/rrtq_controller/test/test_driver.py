@@ -13,6 +13,9 @@ A = np.array([[0, 0, 1, 0], [0, 0, 0, 1], [0, 0, -DAMPING / MASS, 0], [0, 0, 0, 
 B = np.array([[0, 0], [0, 0], [1 / MASS, 0], [0, 1 / MASS]])
 
 
+PD = ((40, 0, 30, 0), (0, 40, 0, 30))   # an admissible first policy for the 40 kg rover
+
+
 def zoh(dt):
     big = np.zeros((6, 6))
     big[:4, :4], big[:4, 4:] = A, B
@@ -36,7 +39,7 @@ def test_follow_plan_keeps_the_leg_when_the_target_stays():
 def test_driver_walks_the_waypoints_to_the_goal():
     dt = 0.05
     phi, gam = zoh(dt)
-    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=((40, 0, 30, 0), (0, 40, 0, 30)),
+    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=PD,
                               probing_std=5.0)
     driver = LearningDriver(config, 4, 2, 1, np.random.default_rng(1))
     x = np.zeros(4)
@@ -54,7 +57,7 @@ def test_driver_walks_the_waypoints_to_the_goal():
 def test_an_empty_plan_holds_the_robot_where_it_is():
     dt = 0.05
     phi, gam = zoh(dt)
-    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=((40, 0, 30, 0), (0, 40, 0, 30)),
+    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=PD,
                               probing_std=0.0)
     driver = LearningDriver(config, 4, 2, 1, np.random.default_rng(1))
     x = np.array([1.0, 2.0, 0.8, -0.5])              # moving when the path is lost

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rrtq_controller.legs import LegEvent, LegSequencer, kinodynamic_distance
+from rrtq_controller.legs import LegEvent, LegSequencer
 
 
 def test_window_switches_to_the_next_waypoint_and_keeps_velocity():
@@ -26,8 +26,3 @@ def test_goal_and_horizon_restart_and_new_plan():
     assert seq.update(np.array([0.96, 0.0, 0.0, 0.0]), 30.0) is LegEvent.CONTINUE
     leg = seq.set_plan([[5.0, 5.0]], np.array([0.96, 0.0, 0.1, 0.0]), 31.0)
     assert leg is not None and leg.index == 2 and not seq.goal_reached
-
-
-def test_kinodynamic_distance_is_the_offset_from_the_straight_edge():
-    x0 = np.array([-4.0, 0.0, 0.0, 0.0])
-    assert np.isclose(kinodynamic_distance(x0, np.array([-2.0, 0.5, 0, 0]), 4.0), 0.5)

@@ -22,6 +22,8 @@ def test_kinodynamic_distance_is_the_distance_to_the_leg_line():
     # On the line: zero. Degenerate leg: distance from the target.
     assert kinodynamic_distance([1, 1], [4, 5], [2.5, 3.0]) == pytest.approx(0.0, abs=1e-12)
     assert kinodynamic_distance([2, 2], [2, 2], [5, 6]) == pytest.approx(5.0)
+    # Leg from (-4, 0) to the origin, robot at (-2, 0.5): 0.5 m off the edge.
+    assert kinodynamic_distance([-4, 0, 0, 0], [0, 0, 0, 0], [-2, 0.5, 0, 0]) == pytest.approx(0.5)
 
 
 @pytest.mark.parametrize('margin', [0.1, 0.5, 2.0])
