@@ -5,8 +5,15 @@ import subprocess
 import sys
 
 HERE = pathlib.Path(__file__).resolve().parent
-BENCHMARKS = ['lockstep_speed.py', 'recorder_throughput.py', 'controller_bench.py', 'planner_vs_ompl.py']
+ROOT = HERE.parent
+BENCHMARKS = [[sys.executable, name] for name in (
+    'lockstep_speed.py', 'recorder_throughput.py', 'controller_bench.py', 'planner_vs_ompl.py')]
+# Monte Carlo of the closed loop (rrtq bench): 50 seeds of random layouts on the paper
+# scenario, on every core; about 25 minutes on 2 cores.
+BENCHMARKS.append([str(ROOT / 'scripts/rrtq'), 'bench', str(ROOT / 'scenarios/rrtqx_paper.yaml'),
+                   '--seeds', '50', '--runs', str(ROOT / 'runs/bench/rrtqx-paper'),
+                   '--out', str(HERE / 'results'), '--overwrite'])
 
-for name in BENCHMARKS:
-    print(f'== {name}', flush=True)
-    subprocess.run([sys.executable, str(HERE / name)], check=True, cwd=HERE)
+for command in BENCHMARKS:
+    print(f'== {" ".join(pathlib.Path(part).name for part in command[1:3])}', flush=True)
+    subprocess.run(command, check=True, cwd=HERE)

@@ -1,4 +1,4 @@
-"""``rrtq``: run scenarios, and (as they land) plan, report and benchmark.
+"""``rrtq``: run scenarios, plan, report and benchmark (Monte Carlo).
 
 Exit codes: 0 success, 1 failed mission, 2 bad input (nothing started).
 """
@@ -42,6 +42,8 @@ def _parser() -> argparse.ArgumentParser:
                      help='replace an existing recording in the output directory')
     sub.add_parser('plan', help='the RRT^X planner alone on a scenario or Otte file; '
                    "'rrtq plan --help' for its options", add_help=False)
+    sub.add_parser('bench', help='Monte Carlo over seeds and random obstacle layouts; '
+                   "'rrtq bench --help' for its options", add_help=False)
     rep = sub.add_parser('report', help='figures and summary from a recording alone')
     rep.add_argument('recording', type=pathlib.Path, help='run.mcap of a run')
     rep.add_argument('--out', type=pathlib.Path,
@@ -104,6 +106,9 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ['plan']:
         from rrtq_planner.plan_cli import main as plan_main
         return plan_main(argv[1:])
+    if argv[:1] == ['bench']:
+        from rrtq_bringup.bench import main as bench_main
+        return bench_main(argv[1:])
     args = _parser().parse_args(argv)
     return {'run': cmd_run, 'report': cmd_report}[args.command](args)
 

@@ -14,8 +14,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from rrtq_sim.obstacles import point_polygon_distance
-from rrtq_sim.perception import Perception
-from rrtq_sim.scenario import ObstacleSpec
+from rrtq_sim.perception import TrueObstacles
 
 
 class Outcome(enum.StrEnum):
@@ -52,9 +51,9 @@ def _percentiles(values: Sequence[float], qs: Sequence[float]) -> dict[str, floa
 class MissionMonitor:
     """Feeds on odometry and commands; says when the run is over and summarises it."""
 
-    def __init__(self, config: MissionConfig, obstacles: Sequence[ObstacleSpec]) -> None:
+    def __init__(self, config: MissionConfig, truth: TrueObstacles) -> None:
         self.config = config
-        self.obstacles = tuple(obstacles)
+        self.truth = truth
         self.outcome = Outcome.RUNNING
         self.reason = ''
         self.t = 0.0
@@ -71,12 +70,11 @@ class MissionMonitor:
         self.no_path_since: float | None = None
 
     def clearance(self, position: np.ndarray, t: float) -> float:
-        """Distance from the robot's disc to the nearest obstacle existing at ``t``."""
+        """Advance the truth to ``t``; distance from the robot's disc to the nearest obstacle."""
         best = math.inf
-        for spec in self.obstacles:
-            if Perception.exists(spec, t):
-                dist = float(point_polygon_distance(position[None, :], spec.polygon)[0])
-                best = min(best, dist - self.config.robot_radius)
+        for spec in self.truth.update(position, t):
+            dist = float(point_polygon_distance(position[None, :], spec.polygon)[0])
+            best = min(best, dist - self.config.robot_radius)
         return best
 
     def on_odometry(self, t: float, position: np.ndarray) -> Outcome:

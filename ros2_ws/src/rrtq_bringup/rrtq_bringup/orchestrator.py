@@ -27,6 +27,7 @@ import yaml
 
 from rrtq_bringup.graph import NodeSpec, build_graph
 from rrtq_bringup.mission import MissionConfig, MissionMonitor, Outcome
+from rrtq_sim.perception import TrueObstacles
 from rrtq_sim.scenario import Scenario
 
 EXIT_SUCCESS, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
@@ -104,7 +105,8 @@ class Run:
             goal_tolerance=float(scenario.planner.get('goal_tolerance', options.goal_tolerance)),
             duration=scenario.duration,
             robot_radius=scenario.robot_radius, dt=ctrl.dt,
-            stop_at_goal=str(ctrl.variant) != 'open_loop'), scenario.obstacles)
+            stop_at_goal=str(ctrl.variant) != 'open_loop'),
+            TrueObstacles.for_scenario(scenario))
         self.stop_requested: str | None = None
         self.failed_node: dict | None = None
         self.children: dict[str, subprocess.Popen] = {}

@@ -21,7 +21,7 @@ from rrtq_sim import qos, topics
 from rrtq_sim.lockstep import Requirement, StepInputs, seconds_to_ns
 from rrtq_sim.params import declare, spin_node
 from rrtq_sim.obstacles import point_in_polygon
-from rrtq_sim.perception import Perception
+from rrtq_sim.perception import TrueObstacles
 from rrtq_sim.scenario import load_scenario
 
 
@@ -33,7 +33,7 @@ class SafetyNode(Node):
         d = lambda *a, **k: declare(self, *a, **k)  # noqa: E731
         scenario = load_scenario(d('scenario', '', 'scenario YAML (true obstacles, robot '
                                    'radius)'))
-        self.truth = scenario.obstacles
+        self.truth = TrueObstacles.for_scenario(scenario)
         self.robot_radius = scenario.robot_radius
         self.monitor = SafetyMonitor(SafetyConfig(
             robot_radius=scenario.robot_radius,
@@ -107,7 +107,7 @@ class SafetyNode(Node):
             self.published = self.monitor.augmented(self.detected, position)
             self.aug_pub.publish(conv.obstacle_array_msg(stamp, self.published,
                                                          self.monitor.margin))
-        existing = [s for s in self.truth if Perception.exists(s, t)]
+        existing = self.truth.update(position, t)
         gap, index = clearance(position, [s.polygon for s in existing], self.robot_radius)
         if gap < 0.0 and not self.collided:
             self.collided = True

@@ -281,6 +281,10 @@ class Scenario:
         Free-form planner settings.
     obstacles : tuple of ObstacleSpec
         Ground truth, in file order.
+    appear_clearance : float
+        m; an obstacle due to appear during the run while it is within this distance of
+        the robot's disc is held back until it is not
+        (:class:`rrtq_sim.perception.TrueObstacles`).
     """
 
     path: str
@@ -297,13 +301,15 @@ class Scenario:
     controller: ControllerConfig
     planner: dict[str, Any]
     obstacles: tuple[ObstacleSpec, ...]
+    appear_clearance: float = 1.0
 
 
 # --------------------------------------------------------------------------- reading
 
 _TOP_KEYS = (
     'name', 'seed', 'bounds', 'start', 'goal', 'duration', 'perception_radius',
-    'robot_radius', 'plant', 'disturbance', 'controller', 'planner', 'obstacles',
+    'robot_radius', 'appear_clearance', 'plant', 'disturbance', 'controller', 'planner',
+    'obstacles',
 )  # fmt: skip
 _ROVER_KEYS = ('model', 'mass', 'stiffness', 'damping', 'spring_anchor', 'force_limit')
 _LTI_KEYS = ('model', 'A', 'B', 'spring_anchor', 'force_limit')
@@ -751,6 +757,9 @@ def parse_scenario(data: Any, path: str) -> Scenario:
         data.get('perception_radius', 8.0), 'perception_radius', positive=True
     )
     robot_radius = r.number(data.get('robot_radius', 0.0), 'robot_radius', nonnegative=True)
+    appear_clearance = r.number(
+        data.get('appear_clearance', 1.0), 'appear_clearance', nonnegative=True
+    )
     plant = _plant(r, data.get('plant'))
     ctrl_raw = data.get('controller')
     robust = isinstance(ctrl_raw, Mapping) and ctrl_raw.get('variant') == 'robust'
@@ -794,6 +803,7 @@ def parse_scenario(data: Any, path: str) -> Scenario:
         controller=controller,
         planner=dict(planner),
         obstacles=obstacles,
+        appear_clearance=appear_clearance,
     )
 
 

@@ -8,7 +8,8 @@ that sees it equal to the step's stamp knows to wait for that map.
 
 The ground truth (the obstacles that physically exist) goes on /obstacles/truth, latched,
 whenever it changes: no node of the robot reads it; it is there so that a recording
-can be judged and plotted against the truth alone.
+can be judged and plotted against the truth alone. An obstacle due to appear near the
+robot is held back until the robot is clear of it (``TrueObstacles``).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from rrtq_msgs.msg import ObstacleArray, PerceptionStatus
 from rrtq_sim import conversions as conv
 from rrtq_sim import qos, topics
 from rrtq_sim.params import declare, spin_node
-from rrtq_sim.perception import ObstacleEvent, Perception
+from rrtq_sim.perception import ObstacleEvent, Perception, TrueObstacles
 from rrtq_sim.obstacles import disc_intersects_polygon
 from rrtq_sim.scenario import load_scenario
 
@@ -34,7 +35,9 @@ class SpawnerNode(Node):
         scenario = load_scenario(declare(self, 'scenario', '', 'scenario YAML with the '
                                          'obstacles (validated by the orchestrator)'))
         self.specs = {spec.id: spec for spec in scenario.obstacles}
-        self.perception = Perception(scenario.obstacles, scenario.perception_radius)
+        self.perception = Perception(scenario.obstacles, scenario.perception_radius,
+                                     TrueObstacles.for_scenario(scenario))
+        self.held: frozenset[str] = frozenset()
         self.pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_DETECTED, qos.LATCHED)
         self.status_pub = self.create_publisher(PerceptionStatus, topics.PERCEPTION_STATUS,
                                                 qos.STREAM)
@@ -58,12 +61,16 @@ class SpawnerNode(Node):
         events = self.perception.step(position, t)
         for event, oid in events:
             self.get_logger().info(f't={t:.2f} s: obstacle {oid} {event.value}')
+        for oid in sorted(self.perception.truth.held - self.held):
+            self.get_logger().info(f't={t:.2f} s: obstacle {oid} held back: the robot is '
+                                   'within its appear clearance')
+        self.held = self.perception.truth.held
         if events:
             self.publish(stamp)
         self.publish_truth(stamp)
-        in_range = sum(1 for spec in self.specs.values() if self.perception.exists(spec, t)
-                       and disc_intersects_polygon(position, self.perception.radius,
-                                                   spec.polygon))
+        in_range = sum(1 for spec in self.perception.truth.existing
+                       if disc_intersects_polygon(position, self.perception.radius,
+                                                  spec.polygon))
         self.status = PerceptionStatus(
             header=msg.header, detected_stamp=conv.time_msg(self.detected_stamp),
             known=len(self.perception.known_ids), in_range=in_range,
@@ -72,8 +79,7 @@ class SpawnerNode(Node):
         self.status_pub.publish(self.status)
 
     def publish_truth(self, stamp: int) -> None:
-        existing = [oid for oid, spec in self.specs.items()
-                    if self.perception.exists(spec, stamp * 1e-9)]
+        existing = [spec.id for spec in self.perception.truth.existing]
         if existing != self.existing:
             self.existing = existing
             self.truth_pub.publish(conv.obstacle_array_msg(

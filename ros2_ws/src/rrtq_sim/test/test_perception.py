@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from rrtq_sim.perception import ObstacleEvent, Perception
+from rrtq_sim.perception import ObstacleEvent, Perception, TrueObstacles
 from rrtq_sim.scenario import ObstacleSpec
 
 DET, REM = ObstacleEvent.DETECTED, ObstacleEvent.REMOVED
@@ -61,8 +61,57 @@ def test_disc_not_bounding_box_decides():
 
 
 def test_exists_window_is_half_open():
-    spec = ObstacleSpec('x', box(0, 1, 0, 1), appear_at=2.0, vanish_at=5.0)
-    assert [Perception.exists(spec, t) for t in (1.9, 2.0, 4.9, 5.0)] == [False, True, True, False]
+    truth = TrueObstacles([ObstacleSpec('x', box(0, 1, 0, 1), appear_at=2.0, vanish_at=5.0)], 0.5, 1.0)
+    far = [10.0, 10.0]
+    assert [len(truth.update(far, t)) for t in (1.9, 2.0, 4.9, 5.0)] == [0, 1, 1, 0]
+
+
+def test_before_any_update_the_truth_is_that_of_t0():
+    truth = TrueObstacles(WORLD, robot_radius=0.5, clearance=1.0)
+    assert [s.id for s in truth.existing] == ['A', 'D', 'E', 'G', 'H']
+
+
+def _drive(truth, path):
+    """Feed (t, x) samples with y = 0; the ids existing after each."""
+    return [[s.id for s in truth.update([x, 0.0], t)] for t, x in path]
+
+
+def test_an_appearing_obstacle_is_held_back_while_the_robot_is_near():
+    # Due at t = 1 over the robot's path; the robot (radius 0.5, clearance 1) is within
+    # 1.5 m of it until it has passed x = 4.5: it appears at the first step after that.
+    due = ObstacleSpec('due', box(2.0, 3.0, -0.5, 0.5), appear_at=1.0)
+    truth = TrueObstacles([due], robot_radius=0.5, clearance=1.0)
+    path = [(0.5 * k, 0.5 * k) for k in range(13)]            # x = t, from 0 to 6
+    existing = _drive(truth, path)
+    first = next(k for k, ids in enumerate(existing) if ids)
+    assert path[first][1] > 4.5 >= path[first - 1][1]
+    assert all(ids == ['due'] for ids in existing[first:])
+    assert truth.appeared_at == {'due': path[first][0]} and truth.held == frozenset()
+
+
+def test_held_back_obstacles_are_reported_and_not_perceived():
+    due = ObstacleSpec('due', box(2.0, 3.0, -0.5, 0.5), appear_at=1.0)
+    perception = Perception([due], radius=5.0, truth=TrueObstacles([due], 0.5, 1.0))
+    assert perception.step([1.0, 0.0], 1.0) == []
+    assert perception.truth.held == frozenset({'due'})
+    assert perception.step([4.6, 0.0], 2.0) == [(DET, 'due')]
+    assert perception.truth.held == frozenset()
+
+
+def test_an_obstacle_held_past_its_vanish_time_never_exists():
+    brief = ObstacleSpec('brief', box(0.0, 1.0, -0.5, 0.5), appear_at=1.0, vanish_at=2.0)
+    truth = TrueObstacles([brief], robot_radius=0.2, clearance=0.0)
+    assert _drive(truth, [(t, 0.5) for t in (1.0, 1.5)] + [(t, 5.0) for t in (2.0, 3.0)]) == [[]] * 4
+    assert truth.appeared_at == {}
+
+
+def test_obstacles_of_t0_are_never_held_and_zero_clearance_still_spares_the_robot():
+    there = ObstacleSpec('there', box(0.6, 1.0, -0.5, 0.5))     # 0.1 m from the robot's disc
+    late = ObstacleSpec('late', box(-1.0, 1.0, -1.0, 1.0), appear_at=0.5)  # would cover it
+    truth = TrueObstacles([there, late], robot_radius=0.5, clearance=0.0)
+    assert _drive(truth, [(0.0, 0.0), (0.5, 0.0), (1.0, 0.0)]) == [['there']] * 3
+    assert truth.held == frozenset({'late'})
+    assert _drive(truth, [(1.5, 3.0)]) == [['there', 'late']]
 
 
 def test_bad_inputs():
@@ -72,4 +121,20 @@ def test_bad_inputs():
         Perception([ObstacleSpec('a', box(0, 1, 0, 1)), ObstacleSpec('a', box(2, 3, 0, 1))], radius=1.0)
     with pytest.raises(ValueError):
         Perception(WORLD, radius=1.0).step([0.0, 0.0, 0.0], 0.0)
+    with pytest.raises(ValueError):
+        TrueObstacles(WORLD, robot_radius=-0.1)
+    with pytest.raises(ValueError):
+        TrueObstacles(WORLD, clearance=math.nan)
     assert Perception([], radius=1.0).step([0.0, 0.0], 0.0) == []
+
+
+def test_scenario_appear_clearance_reaches_the_truth():
+    from rrtq_sim.scenario import ScenarioError, parse_scenario
+    base = {'bounds': {'x': [-5, 5], 'y': [-5, 5]}, 'start': [-4, 0], 'goal': [4, 0], 'robot_radius': 0.5,
+            'obstacles': [{'id': 'due', 'polygon': [[-3, -1], [-2, -1], [-2, 1], [-3, 1]], 'appear_at': 1.0}]}
+    assert parse_scenario(base, 's.yaml').appear_clearance == 1.0
+    truth = TrueObstacles.for_scenario(parse_scenario(base | {'appear_clearance': 0.2}, 's.yaml'))
+    assert truth.update([-3.6, 0.0], 1.0) == ()            # disc 0.1 m away: within 0.2
+    assert [s.id for s in truth.update([-4.0, 0.0], 1.1)] == ['due']   # 0.5 m: clear
+    with pytest.raises(ScenarioError, match='appear_clearance'):
+        parse_scenario(base | {'appear_clearance': -1.0}, 's.yaml')
