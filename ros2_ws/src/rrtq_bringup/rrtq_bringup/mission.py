@@ -13,8 +13,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rrtq_sim.obstacles import point_polygon_distance
 from rrtq_sim.perception import TrueObstacles
+from rrtq_sim.polygon_set import LivePolygons
 
 
 class Outcome(enum.StrEnum):
@@ -54,6 +54,7 @@ class MissionMonitor:
     def __init__(self, config: MissionConfig, truth: TrueObstacles) -> None:
         self.config = config
         self.truth = truth
+        self.existing_shapes = LivePolygons()
         self.outcome = Outcome.RUNNING
         self.reason = ''
         self.t = 0.0
@@ -70,12 +71,12 @@ class MissionMonitor:
         self.no_path_since: float | None = None
 
     def clearance(self, position: np.ndarray, t: float) -> float:
-        """Advance the truth to ``t``; distance from the robot's disc to the nearest obstacle."""
-        best = math.inf
-        for spec in self.truth.update(position, t):
-            dist = float(point_polygon_distance(position[None, :], spec.polygon)[0])
-            best = min(best, dist - self.config.robot_radius)
-        return best
+        """Advance the truth to ``t``; signed gap (m) of the robot's disc to the nearest obstacle.
+
+        Negative when they overlap, also inside an obstacle at robot radius 0.
+        """
+        shapes = self.existing_shapes.update(self.truth.update(position, t))
+        return shapes.nearest(position)[0] - self.config.robot_radius
 
     def on_odometry(self, t: float, position: np.ndarray) -> Outcome:
         """Account one odometry sample; returns the (possibly new) outcome."""

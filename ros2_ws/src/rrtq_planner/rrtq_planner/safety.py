@@ -19,6 +19,8 @@ import numpy.typing as npt
 import shapely
 from shapely.geometry import Polygon
 
+from rrtq_sim.polygon_set import PolygonSet
+
 # m: how far outside a grown obstacle the robot is kept when the margin is capped.
 KEEP_OUT = 0.05
 
@@ -132,18 +134,13 @@ class SafetyMonitor:
         return out
 
 
-def clearance(position: npt.ArrayLike, polygons: Sequence[np.ndarray],
+def clearance(position: npt.ArrayLike, polygons: PolygonSet | Sequence[np.ndarray],
               robot_radius: float) -> tuple[float, int]:
     """Distance (m) from the robot's disc to the nearest polygon (< 0 inside) and its index.
 
-    (inf, -1) when there are no polygons.
+    (inf, -1) when there are no polygons. Give a :class:`PolygonSet` when the same
+    polygons are asked about at every step.
     """
-    if not polygons:
-        return math.inf, -1
-    point = shapely.Point(np.asarray(position, dtype=float)[:2])
-    shapes = [Polygon(p) for p in polygons]
-    distances = np.array([
-        -shape.exterior.distance(point) if shape.contains(point) else shape.distance(point)
-        for shape in shapes])
-    best = int(np.argmin(distances))
-    return float(distances[best]) - robot_radius, best
+    shapes = polygons if isinstance(polygons, PolygonSet) else PolygonSet(polygons)
+    value, index = shapes.nearest(np.asarray(position, dtype=float)[:2])
+    return value - robot_radius, index

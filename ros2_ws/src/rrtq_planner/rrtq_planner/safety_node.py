@@ -20,8 +20,8 @@ from rrtq_sim import conversions as conv
 from rrtq_sim import qos, topics
 from rrtq_sim.lockstep import Requirement, StepInputs, seconds_to_ns
 from rrtq_sim.params import declare, spin_node
-from rrtq_sim.obstacles import point_in_polygon
 from rrtq_sim.perception import TrueObstacles
+from rrtq_sim.polygon_set import LivePolygons, PolygonSet
 from rrtq_sim.scenario import load_scenario
 
 
@@ -54,6 +54,8 @@ class SafetyNode(Node):
         self.detected_stamp = -1
         self.detected: list[tuple[str, np.ndarray]] = []
         self.published: list[tuple[str, np.ndarray]] = []
+        self.published_shapes = PolygonSet([])
+        self.existing_shapes = LivePolygons()
         self.augmented_stamp = 0
         self.collided = False
         self.last: SafetyStatus | None = None
@@ -101,14 +103,16 @@ class SafetyNode(Node):
             leg_index = state.leg_index
             grown = self.monitor.update([state.leg_start.x, state.leg_start.y],
                                         [state.leg_target.x, state.leg_target.y], position)
-        swallowed = any(point_in_polygon(position, poly) for _, poly in self.published)
+        swallowed = self.published_shapes.nearest(position)[0] < 0.0
         if changed or grown or swallowed or self.monitor.published_margin is None:
             self.augmented_stamp = stamp
             self.published = self.monitor.augmented(self.detected, position)
+            self.published_shapes = PolygonSet([poly for _, poly in self.published])
             self.aug_pub.publish(conv.obstacle_array_msg(stamp, self.published,
                                                          self.monitor.margin))
         existing = self.truth.update(position, t)
-        gap, index = clearance(position, [s.polygon for s in existing], self.robot_radius)
+        gap, index = clearance(position, self.existing_shapes.update(existing),
+                               self.robot_radius)
         if gap < 0.0 and not self.collided:
             self.collided = True
             self.get_logger().error(f'collision with {existing[index].id} at t={t:.2f} s, '

@@ -23,7 +23,7 @@ from rrtq_sim import conversions as conv
 from rrtq_sim import qos, topics
 from rrtq_sim.params import declare, spin_node
 from rrtq_sim.perception import ObstacleEvent, Perception, TrueObstacles
-from rrtq_sim.obstacles import disc_intersects_polygon
+from rrtq_sim.polygon_set import LivePolygons
 from rrtq_sim.scenario import load_scenario
 
 
@@ -38,6 +38,7 @@ class SpawnerNode(Node):
         self.perception = Perception(scenario.obstacles, scenario.perception_radius,
                                      TrueObstacles.for_scenario(scenario))
         self.held: frozenset[str] = frozenset()
+        self.existing_shapes = LivePolygons()
         self.pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_DETECTED, qos.LATCHED)
         self.status_pub = self.create_publisher(PerceptionStatus, topics.PERCEPTION_STATUS,
                                                 qos.STREAM)
@@ -68,9 +69,8 @@ class SpawnerNode(Node):
         if events:
             self.publish(stamp)
         self.publish_truth(stamp)
-        in_range = sum(1 for spec in self.perception.truth.existing
-                       if disc_intersects_polygon(position, self.perception.radius,
-                                                  spec.polygon))
+        in_range = len(self.existing_shapes.update(self.perception.truth.existing).within(
+            position, self.perception.radius))
         self.status = PerceptionStatus(
             header=msg.header, detected_stamp=conv.time_msg(self.detected_stamp),
             known=len(self.perception.known_ids), in_range=in_range,

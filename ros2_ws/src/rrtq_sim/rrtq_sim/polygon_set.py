@@ -1,0 +1,129 @@
+"""A fixed set of polygons queried from one point: the nearest, and those meeting a disc.
+
+The referee, the safety node and the spawner ask at every step how far the robot is from
+the nearest true obstacle, or which obstacles meet the perception disc, and a forest has
+hundreds of them. Each polygon's bounding box gives a lower bound on its distance, so
+only the few polygons that can matter get the exact test, all at once over their
+stacked edges. Distances are signed: inside a polygon the distance is minus the depth
+(the distance to its boundary), so a robot of radius 0 inside an obstacle is still
+below zero clearance.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ['LivePolygons', 'PolygonSet']
+
+
+class PolygonSet:
+    """Polygons (each ``(k, 2)``, m, either orientation, no repeated closing vertex).
+
+    Parameters
+    ----------
+    polygons : sequence of array_like
+        The polygons; their index in this sequence names them in every answer.
+    """
+
+    def __init__(self, polygons: Sequence[npt.ArrayLike]) -> None:
+        polys = [np.asarray(p, dtype=float).reshape(-1, 2) for p in polygons]
+        self._count = len(polys)
+        sizes = np.array([len(p) for p in polys], dtype=np.intp)
+        if np.any(sizes < 3):
+            raise ValueError('every polygon needs at least 3 vertices')
+        self._a = np.concatenate(polys) if polys else np.zeros((0, 2))
+        self._b = (np.concatenate([np.roll(p, -1, axis=0) for p in polys]) if polys
+                   else np.zeros((0, 2)))
+        self._owner = np.repeat(np.arange(self._count), sizes)
+        self._lo = np.array([p.min(axis=0) for p in polys]).reshape(-1, 2)
+        self._hi = np.array([p.max(axis=0) for p in polys]).reshape(-1, 2)
+
+    def __len__(self) -> int:
+        return self._count
+
+    def box_distances(self, point: npt.ArrayLike) -> np.ndarray:
+        """(n,) distance (m) from ``point`` to each bounding box: a lower bound, 0 inside."""
+        p = np.asarray(point, dtype=float).reshape(2)
+        gap = np.maximum(np.maximum(self._lo - p, p - self._hi), 0.0)
+        return np.hypot(gap[:, 0], gap[:, 1])
+
+    def signed_distances(self, point: npt.ArrayLike, indices: npt.ArrayLike) -> np.ndarray:
+        """Signed distance (m) from ``point`` to each polygon of ``indices`` (unique).
+
+        Positive outside, 0 on the boundary, minus the distance to the boundary inside.
+        """
+        p = np.asarray(point, dtype=float).reshape(2)
+        idx = np.asarray(indices, dtype=np.intp).reshape(-1)
+        if idx.size == 0:
+            return np.zeros(0)
+        chosen = np.zeros(self._count, dtype=bool)
+        chosen[idx] = True
+        e = np.flatnonzero(chosen[self._owner])     # edges, grouped by ascending owner
+        a, b = self._a[e], self._b[e]
+        ab = b - a
+        ap = p - a
+        len2 = np.einsum('ij,ij->i', ab, ab)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            s = np.where(len2 > 0.0, np.einsum('ij,ij->i', ap, ab) / len2, 0.0)
+        diff = ap - np.clip(s, 0.0, 1.0)[:, None] * ab
+        d2 = np.einsum('ij,ij->i', diff, diff)
+        owner = self._owner[e]
+        starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
+        dist = np.sqrt(np.minimum.reduceat(d2, starts))
+        # Crossing number of a ray to +x, without division (as ObstacleMap.point_free).
+        ay, by = a[:, 1], b[:, 1]
+        cross = ab[:, 0] * ap[:, 1] - ab[:, 1] * ap[:, 0]
+        left = ((ay > p[1]) != (by > p[1])) & ((cross > 0.0) == (by > ay))
+        inside = np.add.reduceat(left.astype(np.intp), starts) % 2 == 1
+        signed = np.where(inside, -dist, dist)
+        return signed[np.searchsorted(owner[starts], idx)]
+
+    def nearest(self, point: npt.ArrayLike) -> tuple[float, int]:
+        """Signed distance (m) to the nearest polygon and its index; (inf, -1) if there is none.
+
+        Exact: a polygon is skipped only when its box is farther than a distance already
+        found (or, inside a polygon, when its box does not hold the point). On a tie the
+        lower index wins.
+        """
+        if self._count == 0:
+            return math.inf, -1
+        lower = self.box_distances(point)
+        first = int(np.argmin(lower))
+        near = lower <= max(float(self.signed_distances(point, [first])[0]), 0.0)
+        near[first] = True          # its box and its distance may differ in the last bit
+        candidates = np.flatnonzero(near)
+        distances = self.signed_distances(point, candidates)
+        j = int(np.argmin(distances))
+        return float(distances[j]), int(candidates[j])
+
+    def within(self, point: npt.ArrayLike, radius: float) -> np.ndarray:
+        """Indices (ascending) of the polygons that meet the closed disc."""
+        candidates = np.flatnonzero(self.box_distances(point) <= radius)
+        return candidates[self.signed_distances(point, candidates) <= radius]
+
+
+class LivePolygons:
+    """The :class:`PolygonSet` of a changing sequence of obstacles (items with ``.polygon``).
+
+    The set is rebuilt only when the sequence changes (item identity), which for the
+    true obstacles is once per appearance or vanishing, not once per step. Indices in
+    the answers of :meth:`update`'s set are positions in the last sequence given.
+    """
+
+    def __init__(self) -> None:
+        self._items: tuple[Any, ...] = ()
+        self._set = PolygonSet([])
+
+    def update(self, items: Sequence[Any]) -> PolygonSet:
+        """The set of ``items``' polygons."""
+        items = tuple(items)
+        if len(items) != len(self._items) or any(
+                a is not b for a, b in zip(items, self._items)):
+            self._items = items
+            self._set = PolygonSet([item.polygon for item in items])
+        return self._set
