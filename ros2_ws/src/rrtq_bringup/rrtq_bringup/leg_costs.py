@@ -41,7 +41,7 @@ The disturbance, when present, enters the running cost through the state it move
 optimum is the nominal LQR problem's (the robust game's −γ²‖d‖² term is not included).
 
 Gain error: with the actor weights Ŵa ((L n) x m) published every step and the time
-basis φ(τ) = exp(−λ_l τ) of :class:`rrtq_controller.config.ControllerConfig`, the learned
+basis φ(τ) recorded beside them (:class:`rrtq_controller.basis.TimeBasis`), the learned
 gain is K̂(τ) = −Σ_l φ_l(τ) Ŵa,lᵀ (û = Ŵaᵀ(φ(τ)⊗x̄) = −K̂x̄); per leg the mean over its
 steps of ‖K̂(τ_k) − R⁻¹BᵀP(τ_k)‖_F / ‖R⁻¹BᵀP(τ_k)‖_F.
 
@@ -62,15 +62,24 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import expm
 
+from rrtq_controller.basis import TimeBasis
+from rrtq_controller.config import ControllerConfig
 from rrtq_sim.riccati import RiccatiSolution, solve_riccati
 from rrtq_sim.scenario import Scenario, SpringAnchor, parse_scenario
 
 Array = NDArray[np.float64]
 
 QUADRATURES = ('zoh', 'trapezoid')
-DEFAULT_TIME_RATES: tuple[float, ...] = (0.0, 0.5, 1.0, 2.0)
-"""The controller core's default time basis (``ControllerConfig.time_rates``); not a
-scenario key, so a recording is read with it."""
+
+
+def time_basis_of(data: Any, horizon: float) -> TimeBasis:
+    """The controller's time basis as recorded in /controller/state (its defaults if absent)."""
+    if not len(getattr(data, 'time_rates', [])):
+        default = ControllerConfig()
+        return TimeBasis(default.time_rates, default.time_powers, horizon)
+    rates = tuple(float(r) for r in data.time_rates)
+    powers = tuple(int(k) for k in getattr(data, 'time_powers', []))
+    return TimeBasis(rates, powers, horizon)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -212,14 +221,20 @@ def _lookup(keys: NDArray[np.int64], table_t: Array) -> NDArray[np.int64]:
     return np.where(found, order[pos], -1)
 
 
-def gain_from_actor(weights: Array, tau: float, n: int, m: int,
-                    rates: tuple[float, ...] = DEFAULT_TIME_RATES) -> Array | None:
-    """K̂(τ) (m x n) from flattened actor weights Ŵa ((L n) x m), or None if they do not fit."""
+def gain_from_actor(weights: Array, tau: float, n: int, m: int, basis: TimeBasis) -> Array | None:
+    """K̂(τ) (m x n) from flattened actor weights Ŵa ((L n) x m), or None if they do not fit.
+
+    ``basis`` is the last recorded one; weights of the exponentials alone (before the
+    controller widened its basis, :meth:`QLearningController.widen_time_basis`) are read
+    on those.
+    """
     w = np.asarray(weights, dtype=float)
-    L = len(rates)
+    if w.size != basis.size * n * m and w.size == len(basis.rates) * n * m:
+        basis = TimeBasis(basis.rates)  # recorded before the controller widened its basis
+    L = basis.size
     if w.size != L * n * m:
         return None
-    phi = np.exp(-np.asarray(rates) * max(tau, 0.0))
+    phi = basis(tau)
     return -np.einsum('l,lij->ji', phi, w.reshape(L, n, m))
 
 
@@ -299,12 +314,11 @@ def _running_cost(mdl: _LegModel, xb: Array, nxt: Array, u: Array, d: Array, tim
     return running, resid
 
 
-def _gain_error(mdl: _LegModel, actor_w: list[Array], taus: Array,
-                time_rates: tuple[float, ...]) -> float:
+def _gain_error(mdl: _LegModel, actor_w: list[Array], taus: Array, basis: TimeBasis) -> float:
     """Mean ‖K̂(τ_k) − K(τ_k)‖_F / ‖K(τ_k)‖_F over the steps (nan without usable weights)."""
     errs = []
     for w, tau in zip(actor_w, taus):
-        K_hat = gain_from_actor(w, float(tau), mdl.n, mdl.m, time_rates)
+        K_hat = gain_from_actor(w, float(tau), mdl.n, mdl.m, basis)
         if K_hat is None:
             return math.nan
         K = mdl.gain(float(tau))
@@ -312,8 +326,7 @@ def _gain_error(mdl: _LegModel, actor_w: list[Array], taus: Array,
     return float(np.mean(errs)) if errs else math.nan
 
 
-def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh',
-              time_rates: tuple[float, ...] = DEFAULT_TIME_RATES) -> LegTable:
+def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh') -> LegTable:
     """Evaluate every leg of a run (see the module doc for the definitions).
 
     Parameters
@@ -321,13 +334,12 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh',
     data
         A :class:`rrtq_bringup.run_data.RunData` (or anything with its fields ``odom_t``,
         ``odom_x``, ``cmd_t``, ``cmd_u``, ``dist_t``, ``dist_d``, ``state_t``,
-        ``leg_index``, ``leg_target``, ``d0``, ``actor_w``).
+        ``leg_index``, ``leg_target``, ``d0``, ``actor_w``, and the time basis
+        ``time_rates``, ``time_powers``, for reconstructing K̂(τ)).
     scenario
         The run's scenario: the true plant, the cost weights, T, ρ.
     quadrature
         ``'zoh'`` (exact under the held inputs) or ``'trapezoid'`` (samples only).
-    time_rates
-        The controller's time basis rates λ_l, 1/s, for reconstructing K̂(τ).
 
     Returns
     -------
@@ -339,6 +351,7 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh',
     A = np.asarray(sc.plant.A)
     n = A.shape[0]
     T, rho = sc.controller.horizon, sc.controller.rho
+    basis = time_basis_of(data, T)
     affine, note = _anchor_note(sc)
     st = _align(data, sc)
     models: dict[tuple[float, ...], _LegModel] = {}
@@ -394,7 +407,7 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh',
             x_end_bar=np.asarray(x_end, dtype=float).copy(), tau_end=tau_end,
             running_cost=running, cost_to_go=mdl.value(x_end, tau_end),
             optimum=mdl.value(x0, T),
-            gain_error=_gain_error(mdl, st.actor_w[s:e], taus, time_rates),
+            gain_error=_gain_error(mdl, st.actor_w[s:e], taus, basis),
             ended_by=ended, model_residual=resid))
     return LegTable(tuple(rows), T, quadrature, note)
 
@@ -408,8 +421,7 @@ def evaluate(path: str | pathlib.Path, quadrature: str = 'zoh') -> LegTable:
     if not raw:
         raise ValueError(f'{path}: no embedded scenario (metadata record rrtq_scenario)')
     data = read_run(path)
-    rates = tuple(data.time_rates) if data.time_rates else DEFAULT_TIME_RATES
-    return leg_table(data, parse_scenario(raw, str(path)), quadrature, rates)
+    return leg_table(data, parse_scenario(raw, str(path)), quadrature)
 
 
 def summary(table: LegTable, last: int = 10) -> dict[str, Any]:

@@ -26,7 +26,8 @@ from mcap.reader import make_reader  # noqa: E402
 
 from rrtq_bringup.recorder_node import SCENARIO_METADATA  # noqa: E402
 from rrtq_bringup.run_data import RunData, read_run  # noqa: E402
-from rrtq_sim.obstacles import point_polygon_distance  # noqa: E402
+from rrtq_sim.polygon_set import PolygonSet  # noqa: E402
+from rrtq_sim.scenario import Scenario, parse_scenario  # noqa: E402
 
 
 
@@ -37,6 +38,15 @@ def embedded_scenario(path: str | pathlib.Path) -> dict:
             if record.name == SCENARIO_METADATA:
                 return yaml.safe_load(record.metadata['yaml']) or {}
     return {}
+
+
+def recorded_scenario(path: str | pathlib.Path) -> Scenario:
+    """The embedded scenario, parsed (plant, controller, bounds...), without its obstacles.
+
+    An obstacle file is named relative to the scenario file, which need not be beside the
+    recording; the obstacles that mattered are in the recording (/obstacles/truth).
+    """
+    return parse_scenario({**embedded_scenario(path), 'obstacles': []}, str(path))
 
 
 def _existence(data: RunData) -> dict[str, tuple[np.ndarray, float, float]]:
@@ -52,15 +62,17 @@ def _existence(data: RunData) -> dict[str, tuple[np.ndarray, float, float]]:
 
 
 def true_clearance(data: RunData, robot_radius: float) -> np.ndarray:
-    """Per odometry sample: distance from the robot's disc to the nearest true obstacle."""
+    """Per odometry sample: signed gap (m) from the robot's disc to the nearest true obstacle.
+
+    Negative when they overlap, also inside an obstacle at robot radius 0.
+    """
     out = np.full(data.odom_t.size, math.inf)
     sets = data.truth + [(math.inf, [])]
     for (t, obstacles), (t_next, _) in zip(sets, sets[1:]):
-        mask = (data.odom_t >= t - 1e-9) & (data.odom_t < t_next - 1e-9)
-        for _, poly in obstacles:
-            if mask.any():
-                out[mask] = np.minimum(out[mask],
-                                       point_polygon_distance(data.odom_x[mask, :2], poly))
+        samples = np.flatnonzero((data.odom_t >= t - 1e-9) & (data.odom_t < t_next - 1e-9))
+        if obstacles and samples.size:
+            shapes = PolygonSet([poly for _, poly in obstacles])
+            out[samples] = [shapes.nearest(p)[0] for p in data.odom_x[samples, :2]]
     return out - robot_radius
 
 
@@ -221,10 +233,8 @@ def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = N
     plot_map(data, scenario, out / 'map.png')
     plot_timeseries(data, scenario, out / 'timeseries.png')
     if data.critic_w and any(w.size for w in data.critic_w):
-        from rrtq_bringup.leg_costs import leg_table, summary as leg_summary, DEFAULT_TIME_RATES
-        from rrtq_sim.scenario import parse_scenario
-        table = leg_table(data, parse_scenario(scenario, str(recording)),
-                          time_rates=tuple(data.time_rates) or DEFAULT_TIME_RATES)
+        from rrtq_bringup.leg_costs import leg_table, summary as leg_summary
+        table = leg_table(data, recorded_scenario(recording))
         if table.rows:
             legs = leg_summary(table)
             summary['legs_vs_optimum'] = {k: legs[k] for k in (

@@ -53,20 +53,36 @@ class RunData:
     goal: np.ndarray | None
     topics: dict[str, int]
     time_rates: list[float] = dataclasses.field(default_factory=list)   # controller's basis
+    time_powers: list[float] = dataclasses.field(default_factory=list)
+
+
+# Topics read_run decodes; every other topic is only counted.
+_DECODED = frozenset((
+    '/odom', '/cmd_force', '/disturbance', '/controller/state', '/safety/status',
+    '/obstacles/truth', '/obstacles/detected', '/obstacles/augmented', '/plan', '/goal_pose'))
 
 
 def read_run(path: str | pathlib.Path) -> RunData:
-    """Decode every message of the topics the report uses."""
+    """Decode every message of the topics the report uses (of /planner/tree, the last)."""
     series: dict[str, list] = {k: [] for k in (
         'odom', 'cmd', 'dist', 'state', 'safety', 'truth', 'detected', 'augmented', 'plan')}
-    tree = None
+    last_tree = None
     goal = None
     topics: dict[str, int] = {}
+    factory = DecoderFactory()
+
+    def decode(schema, channel, raw):
+        return factory.decoder_for(channel.message_encoding, schema)(raw.data)
+
     with open(path, 'rb') as f:
-        reader = make_reader(f, decoder_factories=[DecoderFactory()])
-        for _, channel, _, msg in reader.iter_decoded_messages(log_time_order=True):
+        for schema, channel, raw in make_reader(f).iter_messages(log_time_order=True):
             topic = channel.topic
             topics[topic] = topics.get(topic, 0) + 1
+            if topic == '/planner/tree':     # thousands of points each: decode the last only
+                last_tree = schema, channel, raw
+            if topic not in _DECODED:
+                continue
+            msg = decode(schema, channel, raw)
             if topic == '/odom':
                 p, v = msg.pose.pose.position, msg.twist.twist.linear
                 series['odom'].append((_stamp(msg.header), [p.x, p.y, v.x, v.y]))
@@ -84,10 +100,9 @@ def read_run(path: str | pathlib.Path) -> RunData:
             elif topic == '/plan':
                 series['plan'].append((_stamp(msg.header), np.array(
                     [[p.pose.position.x, p.pose.position.y] for p in msg.poses]).reshape(-1, 2)))
-            elif topic == '/planner/tree':
-                tree = msg
             elif topic == '/goal_pose':
                 goal = np.array([msg.pose.position.x, msg.pose.position.y])
+    tree = None if last_tree is None else decode(*last_tree)
 
     def arrays(key: str, width: int) -> tuple[np.ndarray, np.ndarray]:
         rows = sorted(series[key], key=lambda r: r[0])
@@ -116,7 +131,8 @@ def read_run(path: str | pathlib.Path) -> RunData:
         clearance=np.array([m.min_clearance for m in safety]),
         truth=series['truth'], detected=series['detected'], augmented=series['augmented'],
         plans=series['plan'], tree_segments=_tree_segments(tree), goal=goal, topics=topics,
-        time_rates=list(getattr(states[-1], 'time_rates', [])) if states else [])
+        time_rates=list(getattr(states[-1], 'time_rates', [])) if states else [],
+        time_powers=list(getattr(states[-1], 'time_powers', [])) if states else [])
 
 
 def _tree_segments(msg) -> np.ndarray | None:

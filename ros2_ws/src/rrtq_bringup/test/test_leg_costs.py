@@ -13,7 +13,7 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from rrtq_bringup.leg_costs import gain_from_actor, leg_table, summary
+from rrtq_bringup.leg_costs import gain_from_actor, leg_table, summary, time_basis_of
 from rrtq_bringup.run_data import RunData
 from rrtq_sim.plant import Plant
 from rrtq_sim.riccati import solve_riccati
@@ -175,9 +175,10 @@ def test_gain_from_actor_matches_the_controller_readout():
     ctrl = QLearningController(ControllerConfig(), 4, 2, 0, np.random.default_rng(0))
     W = np.random.default_rng(1).normal(size=ctrl.actor_weights.size)
     ctrl.set_weights(actor=W)
+    basis = time_basis_of(object(), ctrl.config.horizon)  # nothing recorded: the defaults
     for tau in (0.0, 1.3, 10.0):
-        assert np.allclose(gain_from_actor(ctrl.actor_weights, tau, 4, 2), ctrl.gain(tau))
-    assert gain_from_actor(np.zeros(3), 1.0, 4, 2) is None
+        assert np.allclose(gain_from_actor(ctrl.actor_weights, tau, 4, 2, basis), ctrl.gain(tau))
+    assert gain_from_actor(np.zeros(3), 1.0, 4, 2, basis) is None
 
 
 def test_gain_error_is_zero_for_weights_that_fit_the_riccati_gain():
@@ -185,12 +186,11 @@ def test_gain_error_is_zero_for_weights_that_fit_the_riccati_gain():
     sc = scenario(0.0)
     ctl = sc.controller
     sol = solve_riccati(sc.plant.A, sc.plant.B, ctl.M, ctl.R, ctl.P_T, ctl.horizon)
-    rates = np.array([0.0, 0.5, 1.0, 2.0])
     taus = np.linspace(0, 10, 201)
-    Phi = np.exp(-np.outer(taus, rates))
+    Phi = time_basis_of(object(), ctl.horizon).batch(taus)       # the controller's default basis
     Ks = np.array([sol.gain(t).ravel() for t in taus])          # (N, m n)
     C, *_ = np.linalg.lstsq(Phi, Ks, rcond=None)                 # (L, m n)
-    W = -np.transpose(C.reshape(4, 2, 4), (0, 2, 1)).ravel()      # Ŵa rows: (l, i), cols j
+    W = -np.transpose(C.reshape(-1, 2, 4), (0, 2, 1)).ravel()     # Ŵa rows: (l, i), cols j
     data = simulate(sc, WAYPOINTS[:2], optimal_policy(sc), actor_w=W)
     errs = leg_table(data, sc).column('gain_error')
     fit = max(np.linalg.norm(Phi[i] @ C - Ks[i]) / np.linalg.norm(Ks[i]) for i in range(len(taus)))

@@ -2,8 +2,8 @@
 
 The critic of RRT-QX (15) is Q̂ = Ŵcᵀ ν(τ) (U ⊗ U). Here ν(τ)(U ⊗ U) is realised as
 φ(τ) ⊗ b(U): ``b(U)`` holds U_i U_j for i <= j (the half-vectorised Kronecker product)
-and ``φ(τ) = [exp(-λ_0 τ), ..., exp(-λ_{L-1} τ)]`` with λ_0 = 0 is a time basis of the
-time-to-go τ = T - t. The weight of the pair (i, j) is w_ij, so that
+and ``φ(τ) = [exp(-λ_0 τ), ..., exp(-λ_{E-1} τ), (τ/T)^k_1, ...]`` with λ_0 = 0 is a
+time basis of the time-to-go τ = T - t (:class:`TimeBasis`). The weight of the pair (i, j) is w_ij, so that
 ``Q̂ = Σ w_ij U_i U_j = ½ Uᵀ Q̄ U`` with Q̄_ii = 2 w_ii and Q̄_ij = w_ij (i != j).
 """
 
@@ -19,18 +19,37 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class TimeBasis:
-    """φ(τ): exponentials of the time-to-go, φ_l(τ) = exp(-λ_l τ) (τ in s, λ in 1/s)."""
+    """φ(τ) of the time-to-go τ, s: exponentials exp(-λ_l τ), then powers (τ / T)^k.
+
+    The exponentials describe values that settle (a stabilising policy's); the powers
+    describe values that keep growing over the horizon (a policy that leaves the robot
+    away from its target accrues cost linearly in τ: the zero policy on a plant that
+    is not stable by itself). The first function is the constant (λ_0 = 0).
+    """
 
     rates: tuple[float, ...]
+    """λ_l, 1/s."""
+    powers: tuple[int, ...] = ()
+    """k >= 1 of the polynomial functions (τ / T)^k."""
+    horizon: float = 1.0
+    """T, s, that scales the polynomial functions."""
 
     @property
     def size(self) -> int:
         """L, the number of time functions."""
-        return len(self.rates)
+        return len(self.rates) + len(self.powers)
 
     def __call__(self, tau: float) -> Array:
         """Evaluate φ(τ); τ is clipped at 0 (past the horizon the terminal critic is used)."""
-        return np.exp(-np.asarray(self.rates) * max(tau, 0.0))
+        return self.batch(np.array([tau], dtype=float))[0]
+
+    def batch(self, taus: Array) -> Array:
+        """φ at every τ of ``taus``: (N,) -> (N, L)."""
+        t = np.maximum(np.asarray(taus, dtype=float), 0.0)[:, None]
+        exps = np.exp(-t * np.asarray(self.rates, dtype=float))
+        if not self.powers:
+            return exps
+        return np.hstack([exps, (t / self.horizon) ** np.asarray(self.powers, dtype=float)])
 
 
 class QuadraticBasis:

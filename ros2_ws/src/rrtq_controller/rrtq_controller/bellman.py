@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from .basis import QuadraticBasis
+from .basis import QuadraticBasis, TimeBasis
 
 Array = NDArray[np.float64]
 
@@ -38,8 +38,7 @@ class Policy:
     R: Array
     P_T: Array
     gamma: float
-    rates: Array
-    """Time-basis decay rates, 1/s."""
+    time_basis: TimeBasis
 
 
 def _features(phi: Array, x: Array) -> Array:
@@ -71,9 +70,9 @@ def bellman_rows(basis: QuadraticBasis, pol: Policy, fixed_w: Array, dt: float,
         e_c1 = σθ + k and e_c2 = -(σ_f θ + k_f).
     """
     n, m, q = basis.n, basis.m, basis.q
-    rates = pol.rates
-    phi0 = np.exp(-np.maximum(tau0, 0.0)[:, None] * rates)
-    phi1 = np.exp(-np.maximum(tau1, 0.0)[:, None] * rates)
+    phi0 = pol.time_basis.batch(tau0)
+    phi1 = pol.time_basis.batch(tau1)
+    L = phi0.shape[1]
     U0, u0, d0 = _policy_U(pol, phi0, x0)
     U1, u1, d1 = _policy_U(pol, phi1, x1)
     b0 = U0[:, basis.rows] * U0[:, basis.cols]
@@ -92,10 +91,10 @@ def bellman_rows(basis: QuadraticBasis, pol: Policy, fixed_w: Array, dt: float,
         sig[:, :, xd] -= h * corr_d
     k = (b1[:, fixed] - b0[:, fixed]) @ fixed_w
     k += h * (_running_cost(pol, x0, u0, d0) + _running_cost(pol, x1, u1, d1))
-    ones = np.ones((len(x1), rates.size))
-    Uf, _, _ = _policy_U(pol, ones, x1)
+    phi_end = np.repeat(pol.time_basis.batch(np.zeros(1)), len(x1), axis=0)
+    Uf, _, _ = _policy_U(pol, phi_end, x1)
     bf = Uf[:, basis.rows] * Uf[:, basis.cols]
-    sig_f = np.repeat(bf[:, None, free], rates.size, axis=1)
+    sig_f = phi_end[:, :, None] * bf[:, None, free]
     k_f = bf[:, fixed] @ fixed_w - 0.5 * np.einsum('ni,ij,nj->n', x1, pol.P_T, x1)
     N = len(x0)
     return sig.reshape(N, -1), k, sig_f.reshape(N, -1), k_f

@@ -193,7 +193,8 @@ class ControllerNode(Node):
             state.d0, state.d, state.rho = out.d0, out.d, self.rho
             state.probing_noise = _floats(out.probing)
             if isinstance(self.driver, LearningDriver):
-                state.time_rates = _floats(self.driver.controller.config.time_rates)
+                state.time_rates = _floats(self.driver.controller.time_basis.rates)
+                state.time_powers = _floats(self.driver.controller.time_basis.powers)
             state.critic_weights = _floats(out.critic_weights)
             state.actor_weights = _floats(out.actor_weights)
             state.disturbance_weights = _floats(out.disturbance_weights)

@@ -53,7 +53,7 @@ class QLearningController:
         self.robust = self.config.variant is Variant.ROBUST
         self.n, self.m, self.q = n, m, (q if self.robust else 0)
         self._rng = rng
-        self.time_basis = TimeBasis(self.config.time_rates)
+        self.time_basis = TimeBasis(self.config.time_rates, self.config.time_powers, self.config.horizon)
         self.basis = QuadraticBasis(n, m, self.q)
         L, b = self.time_basis.size, self.basis
         self._fixed_w = b.fixed_weights(self.config.R, self.config.gamma if self.robust else None)
@@ -72,7 +72,9 @@ class QLearningController:
         self._since_eval = 0
         self.critic_trusted = False
         """Whether the actors currently follow the critic (see :meth:`policy_evaluation`)."""
-        self._rates = np.asarray(self.config.time_rates, dtype=float)
+        self._full_legs = 0
+        self.widened = False
+        """Whether the time basis was widened by ``widen_powers`` (see :meth:`widen_time_basis`)."""
         self._d_out = np.zeros(self.q)
         self._noise_u = np.zeros(m)
         self._noise_d = np.zeros(self.q)
@@ -89,6 +91,12 @@ class QLearningController:
         """
         del x0_bar  # D0 is the sequencer's business; the critic needs no leg data
         if self.leg_index >= 0:
+            ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
+            self._full_legs = self._full_legs + 1 if ran_out else 0
+            c = self.config
+            if (self._full_legs >= c.widen_after_legs and c.widen_powers and not self.widened
+                    and isinstance(self.critic, LeastSquaresCritic)):
+                self.widen_time_basis()
             self.policy_evaluation()
         self.leg_index += 1
         self._t0 = float(t)
@@ -127,12 +135,12 @@ class QLearningController:
             self.start_leg(x_bar, t)
         x = np.array(x_bar, dtype=float)  # a copy: it is kept for the next step
         tau = self.time_to_go(t)
-        phi = self.time_basis(tau)
         e_c1 = e_c2 = 0.0
         if self._prev is not None:
             measured = d_applied is not None and self.robust
             d_prev = np.asarray(d_applied, dtype=float) if measured else self._d_out
             e_c1, e_c2 = self.critic_update(tau, x, d_prev)
+        phi = self.time_basis(tau)  # after the update, which may widen the basis
         e_a = e_d = np.zeros(0)
         if self.leg_index >= self.config.actor_warmup_legs and self.critic_trusted:
             e_a = self.actor_update(phi, x)
@@ -186,24 +194,61 @@ class QLearningController:
     def policy_evaluation(self) -> None:
         """Re-fit the least-squares critic for the current actors; re-check the critic's trust.
 
-        The actors follow the critic only while its value kernel P̂(τ) (see
-        :meth:`value_kernel`) is positive definite on [T/2, T] (where legs, which end at
-        D <= ρ D0, spend their time; near τ = 0 the time basis fits worst): with M >= 0 and P(T) > 0
-        every policy's value is, so an indefinite kernel means the critic has not yet
-        been identified (e.g. from one leg in one direction) and its greedy gain must not
-        be followed. When the actors' current policy fails this check, they are rolled
-        back to the last policy that passed it (initially the initial weights). This is
-        model-free; without it a first leg's poor fit could destabilise the loop.
+        The actors follow the critic only while the value it assigns to their own policy,
+        P̂^π(τ) (see :meth:`policy_value_kernel`), is positive definite on [T/2, T] (where
+        legs, which end at D <= ρ D0, spend their time; near τ = 0 the time basis fits
+        worst): with M >= 0 and P(T) > 0 every policy's value is, so an indefinite kernel
+        means the critic has not yet been identified (e.g. from one leg in one direction)
+        and its greedy gain must not be followed. When the check fails, the actors are
+        rolled back to the last policy that passed it (initially the initial weights).
+        This is model-free; without it a first leg's poor fit could destabilise the loop.
+        The greedy kernel of :meth:`value_kernel` (min over u of Q̂) is not the test: for a
+        poor policy, such as the zero policy on the rover without a spring, Q̂_xuR⁻¹Q̂_ux
+        exceeds Q̂_xx and that kernel is indefinite although the fit is right, so learning
+        never starts from a zero gain.
         """
         if isinstance(self.critic, LeastSquaresCritic):
             self.critic.evaluate(self._rows)
         self._since_eval = 0
         taus = np.linspace(0.5 * self.config.horizon, self.config.horizon, 6)
-        self.critic_trusted = all(np.linalg.eigvalsh(self.value_kernel(t)).min() > 0 for t in taus)
+        self.critic_trusted = all(np.linalg.eigvalsh(self.policy_value_kernel(t)).min() > 0 for t in taus)
         if self.critic_trusted:
             self._safe = (self._Wa.copy(), self._Wd.copy())
         else:
             self._Wa, self._Wd = self._safe[0].copy(), self._safe[1].copy()
+
+    def widen_time_basis(self) -> None:
+        """Append the powers (τ / T)^k of ``widen_powers`` to the time basis, once.
+
+        Called at a leg start after ``widen_after_legs`` legs in a row ran their whole
+        horizon without reaching their window: the policy does not bring the robot to
+        its targets, so its value keeps growing over the horizon (the zero gain on the
+        rover without a spring: linearly in τ), which the exponentials cannot fit.
+
+        The actors' policy is unchanged (zero weights on the new functions); the
+        least-squares critic stores raw samples and is re-fitted on the wider basis from
+        a zero prior.
+        """
+        c, n, b = self.config, self.n, self.basis
+        powers = c.time_powers + tuple(k for k in c.widen_powers if k not in c.time_powers)
+        extra = len(powers) - len(c.time_powers)
+        self.time_basis = TimeBasis(c.time_rates, powers, c.horizon)
+        # the old fit (of a value it could not represent) is no prior for the new one
+        self.critic.theta = np.zeros(self.time_basis.size * b.free.size)
+        self._Wa = np.vstack([self._Wa, np.zeros((extra * n, self.m))])
+        self._Wd = np.vstack([self._Wd, np.zeros((extra * n, self.q))])
+        self._safe = (np.vstack([self._safe[0], np.zeros((extra * n, self.m))]),
+                      np.vstack([self._safe[1], np.zeros((extra * n, self.q))]))
+        self.widened = True
+
+    def policy_value_kernel(self, tau: float) -> Array:
+        """P̂^π(τ) of the actors' own value V̂^π = Q̂(x̄, û, d̂) = ½x̄ᵀP̂^πx̄ (û = -K̂x̄, d̂ = L̂x̄)."""
+        phi = self.time_basis(tau)
+        Q = self.basis.matrix_of(self._full_weights(phi))
+        n = self.n
+        G = np.vstack([np.eye(n), -self.gain(tau)] + ([self.disturbance_gain(tau)] if self.robust else []))
+        P = G.T @ Q @ G
+        return 0.5 * (P + P.T)
 
     def value_kernel(self, tau: float) -> Array:
         """P̂(τ) of V̂ = min_u max_d Q̂ = ½x̄ᵀP̂x̄: Q̂_xx - Q̂_xuR⁻¹Q̂_ux (+ γ⁻² Q̂_xdQ̂_dx)."""
@@ -219,7 +264,7 @@ class QLearningController:
 
     def _rows(self, *batch: Array) -> tuple[Array, Array, Array, Array]:
         c = self.config
-        pol = Policy(self._Wa, self._Wd, c.M, c.R, c.P_T, c.gamma, self._rates)
+        pol = Policy(self._Wa, self._Wd, c.M, c.R, c.P_T, c.gamma, self.time_basis)
         return bellman_rows(self.basis, pol, self._fixed_w, c.dt, *batch)
 
     def actor_update(self, phi: Array, x: Array) -> Array:

@@ -72,16 +72,36 @@ def test_least_squares_learns_the_riccati_gain_without_spring():
     assert np.median(ratios[-6:]) < 1.02
     assert all(r.reached for r in recs[-6:])
     assert not ctrl.check_gains()
+    assert not ctrl.widened  # the PD gain reaches its windows: the exponentials suffice
+
+
+def test_learns_from_a_zero_gain_without_spring():
+    """No initial gain on a plant that is not stable by itself: the zero policy leaves the
+    robot where it is and legs run out of horizon; its value grows linearly in τ, the
+    widened time basis fits it, the critic's value of that policy is trusted and the
+    actor improves on it."""
+    cfg = dataclasses.replace(NOSPRING, initial_gain=None)
+    ctrl, recs = _learn(cfg, 0.0, 0.02 * np.eye(2), 20, seed=4)
+    assert not recs[0].reached and recs[0].gain_error > 0.99  # the zero gain: nothing moves
+    assert ctrl.widened
+    with_exponentials_only = dataclasses.replace(cfg, widen_powers=())
+    _, stuck = _learn(with_exponentials_only, 0.0, 0.02 * np.eye(2), 8, seed=4)
+    assert not any(r.reached for r in stuck)
+    assert recs[-1].gain_error < 0.1
+    assert np.median([r.cost_ratio for r in recs[-10:]]) < 1.01
+    assert all(r.reached for r in recs[-10:])
 
 
 def test_least_squares_on_the_papers_plant():
     """The passive spring does nearly all the work: cost at the optimum from the start.
 
     The optimal forces are < 1 N (B = 0.025, R = 2), so the probing is 0.5 N; no initial
-    gain is needed (zero force is a stabilising policy here).
+    gain is needed (zero force is a stabilising policy here), legs reach their window and
+    the time basis is never widened.
     """
     cfg = ControllerConfig(M=10.0, R=2.0, P_T=0.5, probing_std=0.5)
-    _, recs = _learn(cfg, 20.0, 2.0 * np.eye(2), 10, seed=2)
+    ctrl, recs = _learn(cfg, 20.0, 2.0 * np.eye(2), 10, seed=2)
+    assert not ctrl.widened
     assert max(r.cost_ratio for r in recs) < 1.01
     assert recs[0].gain_error > 0.9
     assert np.mean([r.gain_error for r in recs[-4:]]) < 0.08
