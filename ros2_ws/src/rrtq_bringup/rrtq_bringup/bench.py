@@ -185,8 +185,8 @@ class Scheduler:
         if job.seed in self.timed_out:
             status = f'timed out after {self.run_timeout:g} s of wall time'
         elif summary is None or proc.returncode not in (0, 1):
-            status = (f'rrtq run exited with status {proc.returncode} without a summary; '
-                      f'see {job.out / "bench.log"}')
+            status = (f'rrtq run exited with status {proc.returncode}'
+                      f'{"" if summary else " without a summary"}; see {job.out / "bench.log"}')
         elif summary['outcome'] == 'interrupted':
             status = 'interrupted'
         else:
@@ -196,7 +196,9 @@ class Scheduler:
         done = len(self.rows)
         wins = sum(1 for r in self.rows if r['status'] == COMPLETED and r['summary']['success'])
         what = summary['outcome'] if status == COMPLETED and summary else status
-        self.progress.show(done, wins, len(self.live), f'seed {job.seed}: {what}')
+        running = len(self.live) + (0 if self.stop else min(len(self.pending),
+                                                             self.workers - len(self.live)))
+        self.progress.show(done, wins, running, f'seed {job.seed}: {what}')
 
     def run(self) -> list[dict[str, Any]]:
         handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
