@@ -43,8 +43,9 @@ class PlannerNode(Node):
         self.seed = d('seed', 0, 'seed of the sampler', low=0)
         self.iterations = d('iterations_per_step', 30, 'lock-step: sampling iterations per '
                             'step', low=0)
-        self.max_nodes = d('max_nodes', 3000, 'the graph stops growing at this many nodes '
-                           '(repairs and robot tracking go on)', low=2)
+        self.max_nodes = d('max_nodes', 3000, 'past this many nodes the graph only fills '
+                           'gaps (space not covered yet, or freed by a vanished obstacle)',
+                           low=2)
         self.budget_s = d('cycle_budget_ms', 10.0, 'paced: wall time of sampling per cycle, '
                           'ms', low=0.1) * 1e-3
         self.tree_period = d('tree_period_s', 1.0, 'sim time between /planner/tree messages, '
@@ -82,7 +83,7 @@ class PlannerNode(Node):
         goal = (msg.pose.position.x, msg.pose.position.y)
         if self.session is None or tuple(self.session.goal) != goal:
             config = RRTXConfig(goal=goal, bounds=self.bounds, steer_distance=self.steer,
-                                epsilon=self.epsilon)
+                                epsilon=self.epsilon, max_nodes=self.max_nodes)
             self.session = PlannerSession(config, np.random.default_rng(self.seed))
             self.get_logger().info(f'goal ({goal[0]:.2f}, {goal[1]:.2f}): planning')
         self._run_ready_steps()
@@ -135,13 +136,15 @@ class PlannerNode(Node):
         start = time.perf_counter()
         done = 0
         if deadline is None:
-            done = min(iterations, max(self.max_nodes - session.planner.node_count, 0))
+            done = iterations
             session.iterate(done)
         else:
-            while (time.perf_counter() < deadline
-                   and session.planner.node_count < self.max_nodes):
+            while time.perf_counter() < deadline:
+                before = session.planner.node_count
                 session.iterate(10)
                 done += 10
+                if before >= self.max_nodes and session.planner.node_count == before:
+                    break   # full, and no gap found this time: leave the core to others
         cycle_ms = (time.perf_counter() - start) * 1e3
         plan = session.take_changed_plan()
         if plan is not None:

@@ -27,6 +27,9 @@ Deliberate deviations, each needed for a property the tests check:
   and a popped v_bot with g != lmc is always rewired.  Then every node outside
   Q satisfies lmc(u) <= d(u, w) + g(w) for each edge u -> w, which gives the
   bound proved in ``reduce_inconsistency``.
+* ``max_nodes`` (not in the paper) bounds the graph without freezing it:
+  past it a sample is kept only in a gap (no node within r(n) / 2), so
+  space an obstacle freed when it vanished still gets nodes and paths.
 * ``propagate_descendants`` re-roots all orphans with one Dijkstra search
   (scipy) instead of queueing their neighbours with g = inf and popping them
   one by one; see its docstring for why the result is the same.
@@ -40,7 +43,7 @@ from .geometry import ObstacleMap
 from .graph import INF, RRTXGraph
 from .heap import KeyedQueue
 from .neighbors import PointIndex
-from .rrtx_config import PlanStatus, RRTXConfig
+from .rrtx_config import FILL_FRACTION, PlanStatus, RRTXConfig
 from .rrtx_obstacles import ObstacleMixin
 from .rrtx_robot import RobotMixin
 
@@ -147,6 +150,9 @@ class RRTX(ObstacleMixin, RobotMixin):
             point = base + (point - base) * (cfg.steer_distance / dist)
             is_robot = False
             nearest, dist, near = self.index.nearest_and_near(point, self.radius)
+        if (not is_robot and cfg.max_nodes is not None and self.graph.n >= cfg.max_nodes
+                and dist < FILL_FRACTION * self.radius):
+            return None  # the graph is full here; past max_nodes it only fills gaps
         if not self.obstacles.point_free(point):
             return None
         v = self.extend(point, near)

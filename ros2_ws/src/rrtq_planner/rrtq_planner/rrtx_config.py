@@ -6,6 +6,9 @@ import enum
 import math
 from dataclasses import dataclass
 
+FILL_FRACTION = 0.5
+"""Past ``max_nodes``, a sample is kept only this fraction of r(n) or farther from every node."""
+
 
 class PlanStatus(enum.Enum):
     """What the planner can currently offer the robot."""
@@ -50,6 +53,12 @@ class RRTXConfig:
     reach_tolerance : float
         m.  ``set_robot`` moves v_bot on to its parent once the robot is this
         close to v_bot.
+    max_nodes : int or None
+        Beyond this many nodes the graph stops getting denser: a sample is
+        kept only where no node lies within ``FILL_FRACTION`` r(n), so the
+        graph still covers space it has not reached, or that a vanished
+        obstacle freed (nodes are never placed inside an obstacle), at a
+        bounded size.  None: no limit.
     """
 
     goal: tuple[float, float]
@@ -61,6 +70,7 @@ class RRTXConfig:
     robot_radius: float = 0.0
     robot_sample_probability: float = 0.05
     reach_tolerance: float = 1e-3
+    max_nodes: int | None = None
 
     def __post_init__(self) -> None:
         x0, x1, y0, y1 = self.bounds
@@ -78,6 +88,8 @@ class RRTXConfig:
             raise ValueError("robot_radius and reach_tolerance must be >= 0")
         if not 0.0 <= self.robot_sample_probability <= 1.0:
             raise ValueError("robot_sample_probability must be in [0, 1]")
+        if self.max_nodes is not None and self.max_nodes < 2:
+            raise ValueError("max_nodes must be >= 2")
 
     @property
     def gamma(self) -> float:

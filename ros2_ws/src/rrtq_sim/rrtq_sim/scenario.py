@@ -567,7 +567,7 @@ PLANNER_KEYS: dict[str, tuple[float, float, bool]] = {
     'steer_distance': (5.0, 1e-3, False),       # m, RRT^X delta
     'epsilon': (0.0, 0.0, False),               # m, epsilon-consistency
     'iterations_per_step': (30, 0, True),       # lock-step sampling budget per step
-    'max_nodes': (3000, 2, True),               # the graph stops growing at this size
+    'max_nodes': (3000, 2, True),               # past this size the graph only fills gaps
     'cycle_budget_ms': (10.0, 0.1, False),      # paced: wall time of sampling per cycle
     'tree_period_s': (1.0, 0.0, False),         # sim time between /planner/tree messages
     'goal_tolerance': (0.5, 1e-3, False),       # m, distance that counts as arrived
