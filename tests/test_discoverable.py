@@ -16,12 +16,14 @@ import importlib.util
 import json
 import os
 import pathlib
+import shutil
 import subprocess
 
 import numpy as np
 import pytest
 import yaml
 
+from rrtq_bringup.leg_costs import evaluate
 from rrtq_bringup.report import report
 from rrtq_bringup.run_data import read_run
 from rrtq_sim.obstacles import load_otte, point_in_polygon, point_polygon_distance
@@ -141,6 +143,13 @@ def test_discovered_and_vanished_obstacles_reach_the_map_and_the_goal_is_reached
     assert summary['min_clearance_m'] == pytest.approx(gap - ROBOT_RADIUS, abs=1e-6)
     assert (out / 'report' / 'map.png').stat().st_size > 0
     assert json.loads((out / 'summary.json').read_text())['outcome'] == 'goal_reached'
+    # So do the leg costs (plant and weights from the embedded scenario, no obstacle file),
+    # also where ../envs/world.txt does not resolve from the recording.
+    moved = tmp_path / 'moved' / 'deeper'
+    moved.mkdir(parents=True)
+    shutil.copy(out / 'run.mcap', moved / 'run.mcap')
+    legs = evaluate(moved / 'run.mcap')
+    assert legs.rows and np.all(np.isfinite(legs.column('ratio')))
 
 
 # ---------------------------------------------------------------- the shipped scenarios

@@ -65,7 +65,7 @@ from scipy.linalg import expm
 from rrtq_controller.basis import TimeBasis
 from rrtq_controller.config import ControllerConfig
 from rrtq_sim.riccati import RiccatiSolution, solve_riccati
-from rrtq_sim.scenario import Scenario, SpringAnchor, parse_scenario
+from rrtq_sim.scenario import Scenario, SpringAnchor
 
 Array = NDArray[np.float64]
 
@@ -414,14 +414,14 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh') -> LegTabl
 
 def evaluate(path: str | pathlib.Path, quadrature: str = 'zoh') -> LegTable:
     """Read a recording and its embedded scenario, and evaluate every leg."""
-    from rrtq_bringup.report import embedded_scenario
+    from rrtq_bringup.report import embedded_scenario, recorded_scenario
     from rrtq_bringup.run_data import read_run
 
-    raw = embedded_scenario(path)
-    if not raw:
+    if not embedded_scenario(path):
         raise ValueError(f'{path}: no embedded scenario (metadata record rrtq_scenario)')
-    data = read_run(path)
-    return leg_table(data, parse_scenario(raw, str(path)), quadrature)
+    # the plant and the weights are all a leg's cost needs; obstacle files named by the
+    # scenario need not be where the recording is now
+    return leg_table(read_run(path), recorded_scenario(path), quadrature)
 
 
 def summary(table: LegTable, last: int = 10) -> dict[str, Any]:
