@@ -74,25 +74,20 @@ class LeastSquaresCritic:
         self._head = (i + 1) % len(self._tau0)
         self.count = min(self.count + 1, len(self._tau0))
 
-    def samples(self) -> tuple[Array, Array, Array, Array, Array, Array]:
-        """The stored batch (τ0, x̄0, τ1, x̄1, u, d), in the order :data:`RowBuilder` takes."""
-        c = self.count
-        return (self._tau0[:c], self._x0[:c], self._tau1[:c], self._x1[:c], self._u[:c],
-                self._d[:c])
-
-    def fit(self, S: Array, y: Array, prior: Array) -> Array:
-        """argmin Σ (Sθ - y)² / (1 + ‖S_i‖²) + ε ‖θ - prior‖² (ε relative to the data)."""
-        w = 1.0 / (1.0 + np.einsum('ij,ij->i', S, S))
-        G = S.T @ (w[:, None] * S)
-        eps = self._ridge * (np.trace(G) / prior.size + 1e-12)
-        return np.linalg.solve(G + eps * np.eye(prior.size), S.T @ (w * y) + eps * prior)
-
     def evaluate(self, rows: RowBuilder) -> None:
         """Policy evaluation: solve for θ over all stored samples with the current actors."""
         if self.count == 0:
             return
-        sig, k, sig_f, k_f = rows(*self.samples())
-        self.theta = self.fit(np.vstack([sig, sig_f]), -np.concatenate([k, k_f]), self.theta)
+        c = self.count
+        sig, k, sig_f, k_f = rows(self._tau0[:c], self._x0[:c], self._tau1[:c], self._x1[:c],
+                                  self._u[:c], self._d[:c])
+        S = np.vstack([sig, sig_f])
+        y = -np.concatenate([k, k_f])
+        w = 1.0 / (1.0 + np.einsum('ij,ij->i', S, S))
+        G = S.T @ (w[:, None] * S)
+        eps = self._ridge * (np.trace(G) / self.theta.size + 1e-12)
+        # θ's size is read here: widening the time basis enlarges it
+        self.theta = np.linalg.solve(G + eps * np.eye(self.theta.size), S.T @ (w * y) + eps * self.theta)
 
 
 Critic = GradientCritic | LeastSquaresCritic

@@ -169,6 +169,10 @@ class QLearningController:
         GRADIENT: one Euler step of the normalised law (22) / ACC (21).
         LEAST_SQUARES: the sample is stored and the critic re-solved for the current
         actors every ``evaluation_period`` (policy evaluation, :class:`LeastSquaresCritic`).
+        A step past the horizon (the goal's leg keeps station with τ clipped at 0) is no
+        sample of the finite-horizon problem and is not learned from: its rows would claim
+        Q̂(·, τ = 0) - Q̂(·, τ = 0) = ∫r, against the terminal condition, and pull the critic
+        (and the station-keeping gain) away.
 
         Returns
         -------
@@ -182,6 +186,8 @@ class QLearningController:
         theta = self.critic.theta
         e_c1 = float(sig[0] @ theta + k[0])
         e_c2 = -float(sig_f[0] @ theta + k_f[0])
+        if tau0 <= 0.0:  # the leg's horizon had passed at the start of this Δt
+            return e_c1, e_c2
         if isinstance(self.critic, LeastSquaresCritic):
             self.critic.add_sample(tau0, x0, tau, x, u_app, d_applied)
         else:
@@ -235,10 +241,11 @@ class QLearningController:
         self.time_basis = TimeBasis(c.time_rates, powers, c.horizon)
         # the old fit (of a value it could not represent) is no prior for the new one
         self.critic.theta = np.zeros(self.time_basis.size * b.free.size)
-        self._Wa = np.vstack([self._Wa, np.zeros((extra * n, self.m))])
-        self._Wd = np.vstack([self._Wd, np.zeros((extra * n, self.q))])
-        self._safe = (np.vstack([self._safe[0], np.zeros((extra * n, self.m))]),
-                      np.vstack([self._safe[1], np.zeros((extra * n, self.q))]))
+
+        def pad(W: Array) -> Array:
+            return np.vstack([W, np.zeros((extra * n, W.shape[1]))])
+        self._Wa, self._Wd = pad(self._Wa), pad(self._Wd)
+        self._safe = (pad(self._safe[0]), pad(self._safe[1]))
         self.widened = True
 
     def policy_value_kernel(self, tau: float) -> Array:
