@@ -199,8 +199,7 @@ def test_shipped_discoverable_scenarios_load(name):
 
 def test_the_otte_copy_keeps_the_peer_geometry():
     peer = ROOT.parent / 'shared' / 'peer-envs' / 'rand_Static.txt'
-    if not peer.exists():
-        pytest.skip('no peer environments beside the clone')
+    assert peer.exists(), f'{peer}: ../shared (the peer environments) must be beside the clone'
     ours = load_otte(ROOT / 'scenarios' / 'envs' / 'rand_discoverable.txt')
     theirs = load_otte(peer)
     assert len(ours) == len(theirs) == 35
