@@ -34,7 +34,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from common import save  # noqa: E402
-from controller_quick import PKG, load_reference  # noqa: E402,F401  (puts the core on sys.path)
+from rrtq_testing import controller_reference  # noqa: E402
 
 from rrtq_controller.config import ActorLaw, ControllerConfig, CriticLaw  # noqa: E402
 from rrtq_controller.q_learning import QLearningController  # noqa: E402
@@ -176,7 +176,7 @@ def main() -> int:
     ap.add_argument('--long-legs', type=int, default=150,
                     help="one longer run of the paper's laws (first seed); 0: none")
     args = ap.parse_args()
-    ref = load_reference()
+    ref = controller_reference
     by_config: dict[str, list[dict]] = {}
     for name in args.config or list(CONFIGS):
         for seed in args.seeds:

@@ -16,30 +16,15 @@ compute time (median, p99). Usage::
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-PKG = ROOT / 'ros2_ws' / 'src' / 'rrtq_controller'
-sys.path.insert(0, str(PKG))
-
-from rrtq_controller.config import ActorLaw, ControllerConfig, CriticLaw  # noqa: E402
-from rrtq_controller.q_learning import QLearningController  # noqa: E402
-
-
-def load_reference():
-    """The test-side ground truth (true plants, Riccati, exact simulation)."""
-    spec = importlib.util.spec_from_file_location('rrtq_controller_reference', PKG / 'test' / 'test_reference.py')
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+from rrtq_controller.config import ActorLaw, ControllerConfig, CriticLaw
+from rrtq_controller.q_learning import QLearningController
+from rrtq_testing import controller_reference
 
 
 PLANTS = {
@@ -95,7 +80,7 @@ def main() -> int:
     ap.add_argument('--actor', choices=[a.value for a in ActorLaw], default=ActorLaw.WHITENED.value)
     ap.add_argument('--json', type=Path)
     args = ap.parse_args()
-    ref = load_reference()
+    ref = controller_reference
     results = []
     for law in [CriticLaw(v) for v in (args.law or [c.value for c in CriticLaw])]:
         res = run(args.plant, law, args.legs, args.seed, ref, ActorLaw(args.actor))

@@ -23,7 +23,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from common import save  # noqa: E402
-from controller_quick import load_reference  # noqa: E402  (puts the core on sys.path)
+from rrtq_testing import controller_reference  # noqa: E402
 
 from rrtq_controller.config import ControllerConfig  # noqa: E402
 from rrtq_controller.q_learning import QLearningController  # noqa: E402
@@ -57,7 +57,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--seeds', type=int, nargs='+', default=[0, 1, 2, 3, 4, 5])
     args = ap.parse_args()
-    ref = load_reference()
+    ref = controller_reference
     rows = []
     for seed in args.seeds:
         rows.append(run(seed, ref))

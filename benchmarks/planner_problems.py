@@ -3,39 +3,20 @@
 BNeck and rand_Static are Otte's files (robot radius 0.5 m); the forests are the
 seeded random polygon forests of the planner tests.  Obstacles are grown exactly
 as ``rrtq plan`` grows them; the optimum is the shortest path in the visibility
-graph of the polygons grown by R (the test helper ``visibility_optimum``, shapely +
-networkx, independent of the planner).
+graph of the polygons grown by R (:mod:`rrtq_testing.paths`, shapely + networkx,
+independent of the planner).
 """
 
 from __future__ import annotations
 
-import importlib.util
-import pathlib
-import sys
 from dataclasses import dataclass
 
 import numpy as np
 
-from rrtq_planner.plan_cli import default_bounds, grow
+from rrtq_planner.routes import default_bounds, grow
+from rrtq_testing import paths as vo
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
-TEST_DIR = ROOT / 'ros2_ws/src/rrtq_planner/test'
 RADIUS = 0.5
-
-
-def _load_helper():
-    if 'visibility_optimum' in sys.modules:
-        return sys.modules['visibility_optimum']
-    spec = importlib.util.spec_from_file_location('visibility_optimum',
-                                                  TEST_DIR / 'visibility_optimum.py')
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules['visibility_optimum'] = module
-    spec.loader.exec_module(module)
-    return module
-
-
-vo = _load_helper()
 
 
 @dataclass(frozen=True)
@@ -63,7 +44,7 @@ def make_problem(name: str, polygons: list[np.ndarray], start, goal,
 
 def problems(forest_seeds: list[int]) -> list[Problem]:
     """BNeck, rand_Static and the given forests."""
-    data = TEST_DIR / 'data'
+    data = vo.OTTE
     out = [make_problem('BNeck', vo.read_otte(data / 'BNeck.txt'), (0, 40), (0, -40)),
            make_problem('rand_Static', vo.read_otte(data / 'rand_Static.txt'), (35, -40),
                         (-40, 40))]

@@ -36,7 +36,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from common import save  # noqa: E402
 from planner_ompl import PLANNERS, OmplQuery  # noqa: E402
 from planner_problems import RADIUS, Problem, make_problem, problems, vo  # noqa: E402
-from rrtq_planner.plan_cli import RRTX_SHARE, grow, make_planner, shortest_route  # noqa: E402
+from rrtq_planner.routes import RRTX_SHARE, grow, make_planner, shortest_route  # noqa: E402
 from rrtq_planner.rrtx import RRTX, RRTXConfig  # noqa: E402
 from rrtq_planner.shortcut import Shortener, path_length  # noqa: E402
 

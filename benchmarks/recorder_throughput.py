@@ -21,7 +21,7 @@ from rclpy.serialization import serialize_message
 from common import ROOT, save
 from rrtq_bringup.orchestrator import domain_id, ros_env
 from rrtq_bringup.recording import McapRecorder, QosOffer
-from rrtq_sim.conversions import odometry_msg
+from rrtq_common.conversions import odometry_msg
 
 N_CORE = 100_000
 N_NODE = 20_000
@@ -29,8 +29,8 @@ N_NODE = 20_000
 PUBLISHER = textwrap.dedent('''
     import sys, time, numpy as np, rclpy
     from nav_msgs.msg import Odometry
-    from rrtq_sim import qos
-    from rrtq_sim.conversions import odometry_msg
+    from rrtq_common import qos
+    from rrtq_common.conversions import odometry_msg
     rclpy.init()
     node = rclpy.create_node('blaster')
     pub = node.create_publisher(Odometry, '/odom', qos.STREAM)

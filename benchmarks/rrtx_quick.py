@@ -18,31 +18,17 @@ Usage: PYTHONPATH=ros2_ws/src/rrtq_planner .venv/bin/python benchmarks/rrtx_quic
 from __future__ import annotations
 
 import argparse
-import datetime
 import pathlib
-import platform
 import time
 
 import numpy as np
 
+from rrtq_bringup.bench_table import machine
+from rrtq_common.otte import read_polygons
 from rrtq_planner.rrtx import RRTX, RRTXConfig
+from rrtq_testing.paths import OTTE
 
-ROOT = pathlib.Path(__file__).resolve().parents[1]
-ENV = ROOT / "ros2_ws/src/rrtq_planner/test/data/rand_Static.txt"
-
-
-def read_otte(path: pathlib.Path) -> list[np.ndarray]:
-    """Polygons of an Otte environment file (an optional flag line per polygon is skipped)."""
-    rows = [ln.strip() for ln in path.read_text().splitlines() if ln.strip()]
-    i = 1
-    polys = []
-    for _ in range(int(rows[0])):
-        k = int(rows[i])
-        polys.append(np.array([[float(v) for v in r.split(",")] for r in rows[i + 1 : i + 1 + k]]))
-        i += 1 + k
-        if i < len(rows) and rows[i] in ("0", "1", "-1"):
-            i += 1
-    return polys
+ENV = OTTE / "rand_Static.txt"
 
 
 def make_planner(delta: float, epsilon: float, seed: int) -> RRTX:
@@ -50,7 +36,7 @@ def make_planner(delta: float, epsilon: float, seed: int) -> RRTX:
         goal=(-40.0, 40.0), bounds=(-50, 50, -50, 50), steer_distance=delta, epsilon=epsilon
     )
     planner = RRTX(cfg, np.random.default_rng(seed))
-    for i, poly in enumerate(read_otte(ENV)):
+    for i, poly in enumerate(read_polygons(ENV)):
         planner.add_obstacle(f"o{i}", poly)
     planner.set_robot((35.0, -40.0))
     return planner
@@ -100,16 +86,6 @@ def repair_times(planner: RRTX, repairs: int, seed: int) -> dict[str, list[float
     return {"add (repair)": add_ms, "regrow +0.2 m": grow_ms, "remove": rem_ms}
 
 
-def cpu_name() -> str:
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.machine()
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--nodes", type=int, default=3000)
@@ -120,8 +96,9 @@ def main() -> None:
     ap.add_argument("--sweep", action="store_true", help="also iterations/s at 1k..16k nodes")
     args = ap.parse_args()
 
-    print(f"{datetime.datetime.now().isoformat(timespec='seconds')}  {cpu_name()}, "
-          f"python {platform.python_version()}, numpy {np.__version__}")
+    info = machine(pathlib.Path(__file__).resolve().parents[1])
+    print(f"{info['date']}  {info['cpu']}, python {info['python']}, numpy {np.__version__}, "
+          f"commit {info['commit']}")
     print(f"rand_Static, delta {args.delta} m, epsilon {args.epsilon} m, seed {args.seed}")
     if args.sweep:
         planner = make_planner(args.delta, args.epsilon, args.seed)

@@ -11,7 +11,7 @@ import yaml
 
 from rrtq_bringup.bench_layouts import LayoutConfig, generate_layout
 from rrtq_bringup.bench_table import aggregate, wilson
-from rrtq_sim.scenario import load_scenario
+from rrtq_bringup.scenario import load_scenario
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 RRTQ = str(ROOT / 'scripts/rrtq')

@@ -75,7 +75,7 @@ def test_reaches_the_goal_without_collision_judged_from_odometry(tmp_path):
     assert proc.returncode == 0, proc.stdout + proc.stderr
     live = json.loads((out / 'summary.json').read_text())
     assert live['outcome'] == 'goal_reached' and live['replans'] >= 1
-    from rrtq_bringup.report import embedded_scenario
+    from rrtq_bringup.run_data import embedded_scenario
     judged = summarise(read_run(out / 'run.mcap'), embedded_scenario(out / 'run.mcap'))
     assert judged['collided'] is False and judged['min_clearance_m'] > 0.0
     assert judged['time_to_goal_s'] is not None

@@ -12,7 +12,6 @@ The rest is fast: path resolution, the shipped scenarios, the forest generator.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import pathlib
@@ -23,11 +22,13 @@ import numpy as np
 import pytest
 import yaml
 
+from rrtq_bringup import forest as make_forest
 from rrtq_bringup.leg_costs import evaluate
 from rrtq_bringup.report import report
 from rrtq_bringup.run_data import read_run
-from rrtq_sim.obstacles import load_otte, point_in_polygon, point_polygon_distance
-from rrtq_sim.scenario import load_scenario
+from rrtq_bringup.scenario import load_scenario
+from rrtq_common.geometry import point_in_polygon, point_polygon_distance
+from rrtq_common.otte import load_otte
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -155,16 +156,7 @@ def test_discovered_and_vanished_obstacles_reach_the_map_and_the_goal_is_reached
 # ---------------------------------------------------------------- the shipped scenarios
 
 
-def forest_module():
-    spec = importlib.util.spec_from_file_location(
-        'make_forest', ROOT / 'scenarios' / 'envs' / 'make_forest.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_forest_generator_keeps_its_gaps_and_the_shipped_forest_is_its_output():
-    make_forest = forest_module()
     text = make_forest.forest_yaml(5, count=150, size=60.0)
     data = yaml.safe_load(text)
     trees = [(np.array(o['circle']['center']), o['circle']['radius']) for o in data['obstacles']]

@@ -12,8 +12,8 @@ from scipy.linalg import expm
 
 from rrtq_bringup.recorder_node import RecorderNode
 from rrtq_bringup.testing import Collector, spin_until, wait_for_messages
-from rrtq_sim import conversions as conv
-from rrtq_sim import qos
+from rrtq_common import conversions as conv
+from rrtq_common import qos
 from rrtq_sim.disturbance_node import DisturbanceNode
 from rrtq_sim.simulator_node import SimulatorNode
 from rrtq_sim.spawner_node import SpawnerNode
@@ -238,7 +238,7 @@ def test_controller_commands_zero_when_odometry_goes_stale(ros):
     node = learning_controller(context, stale_timeout_s=0.3, probing_decay=1.0)
     cmds, odom_pub = drive_with_plan(context, executor, node)
     assert spin_until(executor, lambda: node.count_publishers('/odom') >= 1
-                      and 'plan' in node.latest, 10.0)
+                      and 'plan' in node.gate.latest, 10.0)
     odom_pub.publish(conv.odometry_msg(0, np.zeros(4)))
     wait_for_messages(executor, cmds, 1)
     assert abs(cmds.messages[0].wrench.force.x) > 1.0      # pushing toward x = 3

@@ -5,7 +5,7 @@ and after a change that must not alter behaviour) carry the same CDR bytes on ev
 topic, except for fields that measure wall time. Those bytes are zeroed in place before
 the comparison (their offset found by serialising the message with two marker values);
 every other byte is compared as recorded. A run ends when the supervisor's pause reaches
-the simulator, which may take one more step in one recording than in the other: a
+the simulator, which may take a few more steps in one recording than in the other: a
 recording that equals the other's first messages and differs only by its last few is
 reported as such. A step that was resent (the simulator republishes its
 odometry after a stall, and every node answers it again) repeats a message byte for
@@ -90,9 +90,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--topics', nargs='*', default=list(DEFAULT_TOPICS),
                     help=f'topics to compare (default {" ".join(DEFAULT_TOPICS)}); '
                     "'all' for every topic but /rosout")
-    ap.add_argument('--tail', type=int, default=2,
+    ap.add_argument('--tail', type=int, default=10,
                     help='messages one recording may have beyond the other at its end '
-                    '(default 2: the pause races the stepping)')
+                    '(default 10: the pause races the stepping, most in processes mode)')
     args = ap.parse_args(argv)
     topics = None if args.topics == ['all'] else set(args.topics)
     a, rep_a = read(args.a, topics)
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
             verdict, note = 'identical', ''
         elif abs(len(ma) - len(mb)) <= args.tail:
             verdict, note = 'identical', (f'  (common prefix of {min(len(ma), len(mb))}; '
-                                          'the longer run took one more step before the pause)')
+                                          'the longer run stepped on until the pause arrived)')
         else:
             verdict, note = 'DIFFERENT', '  one is a prefix of the other'
         ok &= verdict == 'identical'

@@ -36,7 +36,7 @@ from rrtq_bringup.bench_layouts import (Layout, LayoutConfig, LayoutError, gener
                                         layout_scenario)
 from rrtq_bringup.bench_table import COMPLETED, aggregate, machine, markdown
 from rrtq_bringup.orchestrator import BadInput, _die_with_parent, check_supported
-from rrtq_sim.scenario import Scenario, ScenarioError, load_scenario
+from rrtq_bringup.scenario import Scenario, ScenarioError, load_scenario
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 ROOT = pathlib.Path(os.environ.get('RRTQ_ROOT', pathlib.Path(__file__).resolve().parents[4]))

@@ -27,9 +27,9 @@ from typing import Any
 
 import numpy as np
 
-from rrtq_bringup.bench_optimum import Optimum, shortest_path
-from rrtq_sim.obstacles import point_polygon_distance, polygon_from_circle
-from rrtq_sim.scenario import Scenario
+from rrtq_bringup.scenario import Scenario
+from rrtq_common.geometry import point_polygon_distance, polygon_from_circle
+from rrtq_common.optimum import Optimum, shortest_path
 
 __all__ = ['LayoutConfig', 'Layout', 'LayoutError', 'generate_layout', 'layout_scenario']
 

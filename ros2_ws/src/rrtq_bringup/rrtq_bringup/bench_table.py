@@ -86,7 +86,10 @@ def aggregate(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 
 def machine(repo: pathlib.Path) -> dict[str, Any]:
-    """CPU model, cores, Python, date (UTC) and the commit of ``repo`` (``+dirty`` if so)."""
+    """CPU model, cores, Python, kernel, date (UTC) and the commit of ``repo`` (``+dirty`` if so).
+
+    Every benchmark result names the machine with this (``benchmarks/common.py`` too).
+    """
     cpu = platform.processor() or 'unknown CPU'
     try:
         with open('/proc/cpuinfo', encoding='utf-8') as fh:
@@ -104,7 +107,8 @@ def machine(repo: pathlib.Path) -> dict[str, Any]:
         commit += '+dirty'
     now = datetime.datetime.now(datetime.timezone.utc)
     return {'cpu': cpu, 'cores': os.cpu_count(), 'python': platform.python_version(),
-            'date': now.strftime('%Y-%m-%d %H:%M UTC'), 'commit': commit}
+            'kernel': platform.release(), 'date': now.strftime('%Y-%m-%d %H:%M UTC'),
+            'commit': commit}
 
 
 def _num(value: float | None, digits: int = 2) -> str:

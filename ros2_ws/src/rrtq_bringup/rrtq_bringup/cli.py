@@ -53,7 +53,7 @@ def _parser() -> argparse.ArgumentParser:
 
 def cmd_run(args: argparse.Namespace) -> int:
     from rrtq_bringup.orchestrator import BadInput, Run, RunOptions, check_supported
-    from rrtq_sim.scenario import ScenarioError, load_scenario
+    from rrtq_bringup.scenario import ScenarioError, load_scenario
 
     try:
         scenario = load_scenario(args.scenario, seed=args.seed)
@@ -104,7 +104,7 @@ def cmd_report(args: argparse.Namespace) -> int:
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv[:1] == ['plan']:
-        from rrtq_planner.plan_cli import main as plan_main
+        from rrtq_bringup.plan_cli import main as plan_main
         return plan_main(argv[1:])
     if argv[:1] == ['bench']:
         from rrtq_bringup.bench import main as bench_main

@@ -2,7 +2,9 @@
 
 One description serves both modes: ``processes`` writes each node's parameters to a
 ROS params file and starts ``python -m <module>``; ``composed`` passes them as
-parameter overrides to node objects on one executor.
+parameter overrides to node objects on one executor. The parameters are the scenario's
+settings dataclasses as they are (:func:`rrtq_common.settings.to_parameters`); each
+node declares its parameters from the same dataclasses.
 
 Lock-step chain of one step k (each arrow: "waits for, stamped t_k"):
 spawner (odom) -> safety (perception status, controller state of k-1) -> planner
@@ -18,12 +20,21 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-import numpy as np
+from rrtq_bringup.recording import RecorderConfig
+from rrtq_bringup.scenario import Scenario, worst_case_game
+from rrtq_common import topics
+from rrtq_common.run import Dimensions, RunConfig
+from rrtq_common.settings import to_parameters
+from rrtq_common.world_yaml import WorldSource
+from rrtq_controller.config import Variant
+from rrtq_sim.disturbance import DisturbanceModel
+from rrtq_sim.simulation import SimulatorConfig
 
-from rrtq_sim.scenario import Scenario
-
-STEP_TOPICS = ('/clock', '/odom', '/cmd_force', '/controller/state', '/disturbance',
-               '/perception/status', '/safety/status', '/planner/stats')
+STEP_TOPICS = (topics.CLOCK, topics.ODOM, topics.CMD_FORCE, topics.CONTROLLER_STATE,
+               topics.DISTURBANCE, topics.PERCEPTION_STATUS, topics.SAFETY_STATUS,
+               topics.PLANNER_STATS)
+# What the simulator reads: the inputs it holds (and the acknowledgements of a step).
+SIMULATOR_READS = (topics.CMD_FORCE, topics.CONTROLLER_STATE, topics.DISTURBANCE)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -37,102 +48,69 @@ class NodeSpec:
     subscribes: tuple[str, ...] = ()   # per-step topics it reads (start-up gate)
 
 
-def _flat(a: np.ndarray) -> list[float]:
-    return [float(v) for v in np.asarray(a, dtype=float).ravel()]
-
-
-def _optional(value: float | None) -> float:
-    return -1.0 if value is None else float(value)
-
-
 def closed_loop(scenario: Scenario) -> bool:
     """A learning controller needs the planner and the safety node."""
-    return str(scenario.controller.variant) != 'open_loop'
+    return scenario.controller.variant is not Variant.OPEN_LOOP
 
 
 def build_graph(scenario: Scenario, speed: float, output: str) -> list[NodeSpec]:
     """The nodes for ``scenario`` (``speed`` 0 = lock-step), recording to ``output``."""
     plant, dist, ctrl = scenario.plant, scenario.disturbance, scenario.controller
-    n, m = plant.n, plant.m
-    lockstep = speed == 0.0
     loop = closed_loop(scenario)
-    robust = str(ctrl.variant) == 'robust'
-    worst_case = str(dist.model) == 'worst_case'
+    robust = ctrl.variant is Variant.ROBUST
+    worst_case = dist.model is DisturbanceModel.WORST_CASE
+    run = to_parameters(RunConfig(dt=ctrl.dt, lockstep=speed == 0.0, seed=scenario.seed))
+    dims = to_parameters(Dimensions(n=plant.n, m=plant.m, q=dist.q))
+    world = to_parameters(WorldSource(scenario=scenario.path))
     sim_time = {'use_sim_time': True}
-    clock = ('/clock',)
+    clock = (topics.CLOCK,)
 
-    def chain(*keys: str) -> list[str]:
-        return list(keys) if lockstep and keys else ['']
+    def only(params: dict[str, Any], *names: str) -> dict[str, Any]:
+        return {k: v for k, v in params.items() if k in names}
 
-    controller_params: dict[str, Any] = {
-        **sim_time, 'variant': str(ctrl.variant), 'n': n, 'm': m, 'q': dist.q,
-        'horizon': ctrl.horizon, 'dt': ctrl.dt, 'rho': ctrl.rho, 'seed': scenario.seed,
-        'chain': chain(*(['planner_stats'] if loop else []) + (['disturbance'] if robust
-                                                               else []))}
-    if loop:
-        controller_params.update(
-            M=_flat(ctrl.M), R=_flat(ctrl.R), P_T=_flat(ctrl.P_T),
-            alpha_c=_optional(ctrl.alpha_c), alpha_a=_optional(ctrl.alpha_a),
-            alpha_d=_optional(ctrl.alpha_d), gamma=float(ctrl.gamma or 3.0),
-            critic_law=ctrl.critic_law, actor_law=ctrl.actor_law,
-            initial_gain=[0.0] if ctrl.initial_gain is None else _flat(ctrl.initial_gain),
-            probing_std=_optional(ctrl.probing_std),
-            probing_decay=_optional(ctrl.probing_decay))
-    else:
-        controller_params.update(
-            forces=[float(v) for row in ctrl.forces for v in row] or [0.0, 0.0, 0.0],
-            goal=_flat(scenario.goal))
-    controller = NodeSpec('controller', 'rrtq_controller.controller_node', 'ControllerNode',
-                          controller_params,
-                          subscribes=clock + ('/odom',) + (('/planner/stats',) if loop else ())
-                          + (('/disturbance',) if robust else ()))
-    disturbance_params: dict[str, Any] = {
-        **sim_time, 'model': str(dist.model), 'n': n, 'F': _flat(dist.F),
-        'amplitude': dist.amplitude, 'frequency': dist.frequency, 'seed': scenario.seed}
-    if worst_case:
-        disturbance_params.update(
-            gamma=float(dist.gamma), A=_flat(plant.A), B=_flat(plant.B), M=_flat(ctrl.M),
-            R=_flat(ctrl.R), P_T=_flat(ctrl.P_T), horizon=ctrl.horizon)
+    controller = NodeSpec(
+        'controller', 'rrtq_controller.controller_node', 'ControllerNode',
+        {**sim_time, **dims, **only(run, 'lockstep', 'seed'), **to_parameters(ctrl)},
+        subscribes=clock + (topics.ODOM,) + ((topics.PLANNER_STATS,) if loop else ())
+        + ((topics.DISTURBANCE,) if robust else ()))
     disturbance = NodeSpec(
         'disturbance_injector', 'rrtq_sim.disturbance_node', 'DisturbanceNode',
-        disturbance_params,
-        subscribes=clock + ('/odom',) + (('/controller/state',) if worst_case else ()))
-    spawner = NodeSpec('obstacle_spawner', 'rrtq_sim.spawner_node', 'SpawnerNode', {
-        **sim_time, 'scenario': scenario.path}, subscribes=clock + ('/odom',))
+        {**sim_time, **dims, **only(run, 'seed'), **to_parameters(dist),
+         **(to_parameters(worst_case_game(scenario)) if worst_case else {})},
+        subscribes=clock + (topics.ODOM,) + ((topics.CONTROLLER_STATE,) if worst_case else ()))
+    spawner = NodeSpec('obstacle_spawner', 'rrtq_sim.spawner_node', 'SpawnerNode',
+                       {**sim_time, **world}, subscribes=clock + (topics.ODOM,))
     published = STEP_TOPICS if loop else STEP_TOPICS[:6]
-    recorder = NodeSpec('recorder', 'rrtq_bringup.recorder_node', 'RecorderNode', {
-        'output': output, 'scenario': scenario.path}, subscribes=published)
+    recorder = NodeSpec('recorder', 'rrtq_bringup.recorder_node', 'RecorderNode',
+                        to_parameters(RecorderConfig(output=output, scenario=scenario.path)),
+                        subscribes=published)
     supervisor = NodeSpec('supervisor', 'rrtq_bringup.supervisor', 'SupervisorNode', {},
-                          subscribes=('/odom', '/cmd_force', '/controller/state')
-                          + (('/planner/stats',) if loop else ()))
+                          subscribes=(topics.ODOM, topics.CMD_FORCE, topics.CONTROLLER_STATE)
+                          + ((topics.PLANNER_STATS,) if loop else ()))
     others = [recorder, supervisor, controller, disturbance, spawner]
     if loop:
-        planner_cfg = scenario.planner
-        (xmin, xmax), (ymin, ymax) = scenario.bounds
-        others.append(NodeSpec('planner', 'rrtq_planner.planner_node', 'PlannerNode', {
-            **sim_time, 'bounds': [float(xmin), float(xmax), float(ymin), float(ymax)],
-            'steer_distance': float(planner_cfg.get('steer_distance', 5.0)),
-            'epsilon': float(planner_cfg.get('epsilon', 0.0)),
-            'iterations_per_step': int(planner_cfg.get('iterations_per_step', 30)),
-            'max_nodes': int(planner_cfg.get('max_nodes', 3000)),
-            'cycle_budget_ms': float(planner_cfg.get('cycle_budget_ms', 10.0)),
-            'tree_period_s': float(planner_cfg.get('tree_period_s', 1.0)),
-            'seed': scenario.seed, 'dt': ctrl.dt, 'chain': chain('safety_status')},
-            subscribes=clock + ('/odom', '/safety/status')))
-        others.append(NodeSpec('safety', 'rrtq_planner.safety_node', 'SafetyNode', {
-            **sim_time, 'scenario': scenario.path, 'dt': ctrl.dt,
-            'growth_threshold': float(planner_cfg.get('growth_threshold', 0.05)),
-            'chain': chain('perception_status', 'controller_state')},
-            subscribes=clock + ('/odom', '/perception/status', '/controller/state')))
-    acks = ['cmd_force', 'controller_state', 'disturbance']
-    simulator_reads = ('/cmd_force', '/controller/state', '/disturbance')
+        others.append(NodeSpec(
+            'planner', 'rrtq_planner.planner_node', 'PlannerNode',
+            {**sim_time, **run, **to_parameters(scenario.planner)},
+            subscribes=clock + (topics.ODOM, topics.SAFETY_STATUS)))
+        others.append(NodeSpec(
+            'safety', 'rrtq_planner.safety_node', 'SafetyNode',
+            {**sim_time, **world, **only(run, 'dt', 'lockstep'),
+             **to_parameters(scenario.safety, exclude=('robot_radius',))},
+            subscribes=clock + (topics.ODOM, topics.PERCEPTION_STATUS,
+                                topics.CONTROLLER_STATE)))
     # The first step waits until every reader of the per-step topics is connected,
     # so that no node (and not the recorder) misses step 0.
-    wait_for = [f'{topic}:{sum(topic in s.subscribes for s in others) + (topic in simulator_reads)}'
-                for topic in published]
-    simulator = NodeSpec('simulator', 'rrtq_sim.simulator_node', 'SimulatorNode', {
-        'n': n, 'dt': ctrl.dt, 'A': _flat(plant.A), 'B': _flat(plant.B), 'F': _flat(dist.F),
-        'force_limit': plant.force_limit, 'spring_anchor': str(plant.spring_anchor),
-        'start': _flat(scenario.start), 'speed': speed, 'acks': acks,
-        'duration': scenario.duration, 'wait_for': wait_for}, subscribes=simulator_reads)
-    return [simulator, *others]
+    wait_for = tuple(f'{topic}:{sum(topic in s.subscribes for s in others) + (topic in SIMULATOR_READS)}'
+                     for topic in published)
+    simulator = SimulatorConfig(start=(float(scenario.start[0]), float(scenario.start[1])),
+                                speed=speed, duration=scenario.duration,
+                                acks=('cmd_force', 'controller_state', 'disturbance'),
+                                wait_for=wait_for)
+    simulator_spec = NodeSpec(
+        'simulator', 'rrtq_sim.simulator_node', 'SimulatorNode',
+        {**only(dims, 'n'), **only(run, 'dt'),
+         **to_parameters(plant, exclude=('model', 'mass', 'stiffness', 'damping')),
+         'F': to_parameters(dist)['F'], **to_parameters(simulator)},
+        subscribes=SIMULATOR_READS)
+    return [simulator_spec, *others]

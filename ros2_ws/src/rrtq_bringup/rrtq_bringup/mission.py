@@ -13,8 +13,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rrtq_sim.perception import TrueObstacles
-from rrtq_sim.polygon_set import LivePolygons
+from rrtq_common.polygon_set import LivePolygons
+from rrtq_common.settings import setting
+from rrtq_common.world import TrueObstacles
 
 
 class Outcome(enum.StrEnum):
@@ -33,10 +34,11 @@ class MissionConfig:
     """What ends a run."""
 
     goal: tuple[float, float]      # m
-    goal_tolerance: float          # m, distance to the goal that counts as reached
     duration: float                # s of sim time
     robot_radius: float            # m
     dt: float                      # s, plant step (for the effort integral)
+    goal_tolerance: float = setting(0.5, unit='m', low=1e-3,
+                                    doc='distance to the goal that counts as reached')
     stop_at_goal: bool = True      # plant-only runs drive a script: they run out the clock
 
 

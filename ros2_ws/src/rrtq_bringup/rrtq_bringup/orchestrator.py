@@ -27,12 +27,13 @@ import yaml
 
 from rrtq_bringup.graph import NodeSpec, build_graph
 from rrtq_bringup.mission import MissionConfig, MissionMonitor, Outcome
-from rrtq_sim.perception import TrueObstacles
-from rrtq_sim.scenario import Scenario
+from rrtq_bringup.scenario import Scenario
+from rrtq_common.world import TrueObstacles
+from rrtq_controller.config import Variant
+from rrtq_controller.driver import DRIVERS
 
 EXIT_SUCCESS, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 DOMAIN_LOCK_DIR = pathlib.Path('/tmp/rrtq-domains')
-IMPLEMENTED_VARIANTS = ('open_loop', 'nominal', 'robust')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,7 +43,6 @@ class RunOptions:
     out_dir: pathlib.Path
     speed: float = 0.0                 # 0: lock-step as fast as possible; > 0: pace factor
     mode: str = 'processes'            # processes | composed
-    goal_tolerance: float = 0.5        # m
     start_timeout_s: float = 60.0      # wall time allowed before the first step
     stall_timeout_s: float = 20.0      # wall time without a new step before giving up
 
@@ -85,10 +85,11 @@ def _die_with_parent() -> None:
 
 
 def check_supported(scenario: Scenario) -> None:
-    if str(scenario.controller.variant) not in IMPLEMENTED_VARIANTS:
+    """Refuse a controller variant that has no driver yet (exit code 2)."""
+    if scenario.controller.variant not in DRIVERS:
         raise BadInput(f'{scenario.path}: controller.variant: '
                        f'{scenario.controller.variant!s} is not implemented yet '
-                       f'(available: {", ".join(IMPLEMENTED_VARIANTS)})')
+                       f'(available: {", ".join(map(str, DRIVERS))})')
 
 
 class Run:
@@ -102,10 +103,9 @@ class Run:
         ctrl = scenario.controller
         self.monitor = MissionMonitor(MissionConfig(
             goal=(float(scenario.goal[0]), float(scenario.goal[1])),
-            goal_tolerance=float(scenario.planner.get('goal_tolerance', options.goal_tolerance)),
-            duration=scenario.duration,
+            goal_tolerance=scenario.goal_tolerance, duration=scenario.duration,
             robot_radius=scenario.robot_radius, dt=ctrl.dt,
-            stop_at_goal=str(ctrl.variant) != 'open_loop'),
+            stop_at_goal=ctrl.variant is not Variant.OPEN_LOOP),
             TrueObstacles.for_scenario(scenario))
         self.stop_requested: str | None = None
         self.failed_node: dict | None = None
@@ -297,7 +297,7 @@ class Run:
             'failed_node': self.failed_node,
             'recording': str(self.out / 'run.mcap'),
         })
-        if self.scenario.controller.variant == 'open_loop':
+        if self.scenario.controller.variant is Variant.OPEN_LOOP:
             # A scripted plant test has no goal to reach: it succeeds when it runs its
             # course without a collision.
             summary['success'] = self.monitor.outcome is Outcome.DURATION

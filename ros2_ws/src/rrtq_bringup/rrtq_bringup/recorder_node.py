@@ -11,10 +11,9 @@ from rclpy.node import Node
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSProfile,
                        ReliabilityPolicy)
 
-from rrtq_sim.params import declare, spin_node
-from rrtq_bringup.recording import INFINITE_DURATION, McapRecorder, QosOffer
-
-SCENARIO_METADATA = 'rrtq_scenario'
+from rrtq_bringup.recording import (INFINITE_DURATION, SCENARIO_METADATA, McapRecorder,
+                                    QosOffer, RecorderConfig)
+from rrtq_common.params import declare_config, spin_node
 
 
 def message_class(type_name: str) -> type:
@@ -64,19 +63,13 @@ class RecorderNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__('recorder', **kwargs)
-        output = declare(self, 'output', 'run.mcap', 'MCAP file to write')
-        period = declare(self, 'discovery_period_s', 0.05,
-                         'wall-clock period of the topic discovery poll, s', low=0.001)
-        flush = declare(self, 'flush_period_s', 1.0,
-                        'close a chunk at least this often (wall clock), s', low=0.01)
-        scenario = declare(self, 'scenario', '', 'scenario file to embed in the recording as '
-                           f'MCAP metadata "{SCENARIO_METADATA}" (empty: none)')
-        self.recorder = McapRecorder(output, flush_period_s=flush)
-        if scenario:
+        config = declare_config(self, RecorderConfig)
+        self.recorder = McapRecorder(config.output, flush_period_s=config.flush_period_s)
+        if config.scenario:
             self.recorder.add_metadata(SCENARIO_METADATA, {
-                'path': scenario, 'yaml': pathlib.Path(scenario).read_text()})
+                'path': config.scenario, 'yaml': pathlib.Path(config.scenario).read_text()})
         self._recorded: dict[str, object] = {}
-        self._timer = self.create_timer(period, self.discover)
+        self._timer = self.create_timer(config.discovery_period_s, self.discover)
         self.discover()
 
     def discover(self) -> None:

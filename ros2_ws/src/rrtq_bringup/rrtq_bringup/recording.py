@@ -22,7 +22,26 @@ import dataclasses
 import pathlib
 import re
 from collections.abc import Callable, Sequence
+
 from mcap.writer import CompressionType, Writer
+
+from rrtq_common.settings import setting
+
+SCENARIO_METADATA = 'rrtq_scenario'
+"""Name of the MCAP metadata record that holds the scenario file (keys ``path``, ``yaml``)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class RecorderConfig:
+    """The recorder node's settings."""
+
+    output: str = setting('run.mcap', doc='MCAP file to write')
+    scenario: str = setting('', doc='scenario file to embed in the recording as MCAP metadata '
+                            f'"{SCENARIO_METADATA}" (empty: none)')
+    discovery_period_s: float = setting(0.05, unit='s', low=0.001,
+                                        doc='wall-clock period of the topic discovery poll')
+    flush_period_s: float = setting(1.0, unit='s', low=0.01,
+                                    doc='close a chunk at least this often (wall clock)')
 
 # Field types in .msg text, as rosbag2's MSG_FIELD_TYPE_REGEX matches them.
 _MSG_FIELD_TYPE = re.compile(r'(?:^|\n)\s*([a-zA-Z0-9_/]+)(?:\[[^\]]*\])?\s+')

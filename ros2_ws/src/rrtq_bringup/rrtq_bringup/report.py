@@ -20,33 +20,13 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-import yaml  # noqa: E402
 from matplotlib.patches import Circle, Polygon as PolygonPatch  # noqa: E402
-from mcap.reader import make_reader  # noqa: E402
 
-from rrtq_bringup.recorder_node import SCENARIO_METADATA  # noqa: E402
-from rrtq_bringup.run_data import RunData, read_run  # noqa: E402
-from rrtq_sim.polygon_set import PolygonSet  # noqa: E402
-from rrtq_sim.scenario import Scenario, parse_scenario  # noqa: E402
+from rrtq_bringup.leg_table import LegTable, leg_table  # noqa: E402
+from rrtq_bringup.leg_table import summary as leg_summary  # noqa: E402
+from rrtq_bringup.run_data import RunData, embedded_scenario, read_run, recorded_scenario  # noqa: E402
+from rrtq_common.polygon_set import PolygonSet  # noqa: E402
 
-
-
-def embedded_scenario(path: str | pathlib.Path) -> dict:
-    """The scenario YAML the recorder embedded as MCAP metadata ({} if absent)."""
-    with open(path, 'rb') as f:
-        for record in make_reader(f).iter_metadata():
-            if record.name == SCENARIO_METADATA:
-                return yaml.safe_load(record.metadata['yaml']) or {}
-    return {}
-
-
-def recorded_scenario(path: str | pathlib.Path) -> Scenario:
-    """The embedded scenario, parsed (plant, controller, bounds...), without its obstacles.
-
-    An obstacle file is named relative to the scenario file, which need not be beside the
-    recording; the obstacles that mattered are in the recording (/obstacles/truth).
-    """
-    return parse_scenario({**embedded_scenario(path), 'obstacles': []}, str(path))
 
 
 def _existence(data: RunData) -> dict[str, tuple[np.ndarray, float, float]]:
@@ -201,7 +181,7 @@ def plot_timeseries(data: RunData, scenario: dict, path: pathlib.Path) -> None:
     plt.close(fig)
 
 
-def plot_legs(table, path: pathlib.Path) -> None:
+def plot_legs(table: LegTable, path: pathlib.Path) -> None:
     """Per leg: cost against the Riccati optimum, and the learned gain's error."""
     index = table.column('index')
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(9, 5), sharex=True)
@@ -233,7 +213,6 @@ def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = N
     plot_map(data, scenario, out / 'map.png')
     plot_timeseries(data, scenario, out / 'timeseries.png')
     if data.critic_w and any(w.size for w in data.critic_w):
-        from rrtq_bringup.leg_costs import leg_table, summary as leg_summary
         table = leg_table(data, recorded_scenario(recording))
         if table.rows:
             legs = leg_summary(table)

@@ -10,8 +10,12 @@ import dataclasses
 import pathlib
 
 import numpy as np
+import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+
+from rrtq_bringup.recording import SCENARIO_METADATA
+from rrtq_bringup.scenario import Scenario, parse_scenario
 
 
 def _stamp(header) -> float:
@@ -142,3 +146,21 @@ def _tree_segments(msg) -> np.ndarray | None:
     points = [[p.x, p.y] for marker in msg.markers if marker.type == 5   # LINE_LIST
               for p in marker.points]
     return np.array(points, dtype=float).reshape(-1, 2, 2)
+
+
+def embedded_scenario(path: str | pathlib.Path) -> dict:
+    """The scenario YAML the recorder embedded as MCAP metadata ({} if absent)."""
+    with open(path, 'rb') as f:
+        for record in make_reader(f).iter_metadata():
+            if record.name == SCENARIO_METADATA:
+                return yaml.safe_load(record.metadata['yaml']) or {}
+    return {}
+
+
+def recorded_scenario(path: str | pathlib.Path) -> Scenario:
+    """The embedded scenario, parsed (plant, controller, bounds...), without its obstacles.
+
+    An obstacle file is named relative to the scenario file, which need not be beside the
+    recording; the obstacles that mattered are in the recording (/obstacles/truth).
+    """
+    return parse_scenario({**embedded_scenario(path), 'obstacles': []}, str(path))

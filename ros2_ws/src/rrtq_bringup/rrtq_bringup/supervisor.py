@@ -10,8 +10,8 @@ from rrtq_msgs.msg import ControllerState, PlannerStats
 from std_msgs.msg import Empty
 
 from rrtq_bringup.mission import MissionMonitor
-from rrtq_sim import conversions as conv
-from rrtq_sim import qos, topics
+from rrtq_common import conversions as conv
+from rrtq_common import qos, topics
 
 
 class SupervisorNode(Node):

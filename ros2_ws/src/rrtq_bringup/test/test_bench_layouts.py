@@ -13,8 +13,8 @@ from shapely.geometry import LineString, Polygon
 
 from rrtq_bringup.bench_layouts import (LayoutConfig, LayoutError, generate_layout,
                                         layout_scenario)
-from rrtq_bringup.bench_optimum import shortest_path
-from rrtq_sim.scenario import load_scenario, parse_scenario
+from rrtq_bringup.scenario import load_scenario, parse_scenario
+from rrtq_common.optimum import shortest_path
 
 PAPER = pathlib.Path(__file__).resolve().parents[4] / 'scenarios' / 'rrtqx_paper.yaml'
 

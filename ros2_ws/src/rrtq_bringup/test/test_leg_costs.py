@@ -13,11 +13,12 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from rrtq_bringup.leg_costs import gain_from_actor, leg_table, summary, time_basis_of
+from rrtq_bringup.leg_model import gain_from_actor, time_basis_of
+from rrtq_bringup.leg_table import leg_table, summary
 from rrtq_bringup.run_data import RunData
 from rrtq_sim.plant import Plant
 from rrtq_sim.riccati import solve_riccati
-from rrtq_sim.scenario import parse_scenario
+from rrtq_bringup.scenario import parse_scenario
 
 Policy = Callable[[float, np.ndarray, np.ndarray], np.ndarray]
 

@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 
 from rrtq_bringup.mission import MissionConfig, MissionMonitor, Outcome
-from rrtq_sim.obstacles import point_polygon_distance, polygon_from_circle
-from rrtq_sim.perception import TrueObstacles
-from rrtq_sim.scenario import ObstacleSpec
+from rrtq_common.geometry import point_polygon_distance, polygon_from_circle
+from rrtq_common.world import ObstacleSpec, TrueObstacles
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])
 

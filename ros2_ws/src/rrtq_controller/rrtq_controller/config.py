@@ -1,17 +1,24 @@
-"""Configuration of the Q-learning controller core (frozen, validated, with units)."""
+"""Configuration of the Q-learning controller core (frozen, validated, with units).
+
+:class:`ControllerConfig` is the one definition of the controller's settings: the
+scenario's ``controller:`` section is read into it, the orchestrator hands it to the
+controller node, the node declares its ROS parameters from it.
+"""
 
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from rrtq_common.run import STEP_S
+from rrtq_common.settings import check, setting
 
-class Variant(enum.Enum):
-    """Which game the controller plays."""
+class Variant(enum.StrEnum):
+    """Which controller drives the robot (StrEnum: compares equal to its YAML string)."""
 
     NOMINAL = 'nominal'
     """Optimal control (RRT-QX §4): critic on U = (x̄, u)."""
@@ -19,8 +26,11 @@ class Variant(enum.Enum):
     ROBUST = 'robust'
     """Two-player zero-sum game (ACC 2019 §III-IV): critic on U = (x̄, u, d)."""
 
+    OPEN_LOOP = 'open_loop'
+    """No learning: a scripted force profile (``forces``), for plant tests."""
 
-class CriticLaw(enum.Enum):
+
+class CriticLaw(enum.StrEnum):
     """How the critic weights are tuned from the integral Bellman equations."""
 
     GRADIENT = 'gradient'
@@ -30,7 +40,7 @@ class CriticLaw(enum.Enum):
     """Recursive, exponentially weighted least squares over the same errors e_c1, e_c2."""
 
 
-class ActorLaw(enum.Enum):
+class ActorLaw(enum.StrEnum):
     """How the actors follow the critic's greedy policy."""
 
     GRADIENT = 'gradient'
@@ -40,6 +50,21 @@ class ActorLaw(enum.Enum):
     WHITENED = 'whitened'
     """The same error averaged over isotropic x̄: Ŵ ← Ŵ - α Δt (Ŵ - Ŵ*), with Ŵ* the critic's
     greedy weights (-(R⁻¹Q̂_ux)ᵀ, γ⁻²Q̂_dxᵀ per time function); every direction alike."""
+
+
+@dataclass(frozen=True)
+class Gains:
+    """The tuning gains in use, 1/s: the configured ones, or the controller's choice."""
+
+    alpha_c: float = 90.0
+    """Critic gain α_c (gradient law only)."""
+    alpha_a: float = 1.2
+    """Control-actor gain α_a (RRT-QX (23))."""
+    alpha_d: float = 0.2
+    """Disturbance-actor gain α_d (ACC (23)); robust variant only.
+
+    ACC's 2.5 (and 1.2) let the simultaneous game iteration diverge in our trials.
+    """
 
 
 def _matrix(value: ArrayLike, size: int, name: str) -> NDArray[np.float64]:
@@ -56,52 +81,53 @@ def _matrix(value: ArrayLike, size: int, name: str) -> NDArray[np.float64]:
     return arr
 
 
-@dataclass(frozen=True)
+_POSITIVE: dict[str, Any] = {'low': 0.0, 'low_open': True}
+
+
+@dataclass(frozen=True, kw_only=True)
 class ControllerConfig:
-    """Parameters of the finite-horizon Q-learning controller.
+    """Parameters of the finite-horizon Q-learning controller (and of the open-loop player).
 
     Matrices may be given as scalars (meaning scalar times identity); they are
-    expanded by :meth:`expanded` once the dimensions n, m are known.
+    expanded by :meth:`expanded` once the dimensions n, m are known. A gain left out
+    (None) is the controller's choice (:class:`Gains`).
     """
 
-    horizon: float = 10.0
-    """T, s: finite horizon of every leg (RRT-QX (2))."""
-    dt: float = 0.05
-    """Δt, s: control period and integral-reinforcement interval (RRT-QX (17))."""
-    M: Any = 10.0
-    """State weight, n x n (or scalar), cost units per (state unit)²."""
-    R: Any = 2.0
-    """Control weight, m x m (or scalar), cost units per N². Also the fixed Q̂_uu."""
-    P_T: Any = 0.5
-    """Terminal Riccati matrix P(T), n x n (or scalar)."""
-    variant: Variant = Variant.NOMINAL
-    critic_law: CriticLaw = CriticLaw.LEAST_SQUARES
-    actor_law: ActorLaw = ActorLaw.WHITENED
-    alpha_c: float = 90.0
-    """Critic gain α_c, 1/s (gradient law only)."""
-    alpha_a: float = 1.2
-    """Control-actor gain α_a, 1/s (RRT-QX (23))."""
-    actor_warmup_legs: int = 1
-    """Legs during which the actors stay at their initial weights while the critic learns."""
-    alpha_d: float = 0.2
-    """Disturbance-actor gain α_d, 1/s (ACC (23)); robust variant only.
-
-    ACC's 2.5 (and 1.2) let the simultaneous game iteration diverge in our trials.
-    """
-    gamma: float = 3.0
-    """Attenuation level γ (robust variant), cost units per disturbance unit."""
-    rho: float = 0.15
-    """Admissible window ρ of the terminal-state evaluation D <= ρ D0 (RRT-QX (4)-(5))."""
-    time_rates: tuple[float, ...] = (0.0, 0.5, 1.0, 2.0)
-    """Decay rates λ_l, 1/s, of the time basis φ_l(τ) = exp(-λ_l τ) of the time-to-go τ.
-
-    The first rate must be 0 (the constant function, which carries the fixed Q̂_uu = R).
-    """
-    time_powers: tuple[int, ...] = ()
-    """Powers k of polynomial time functions (τ / T)^k appended to the exponentials."""
-    widen_powers: tuple[int, ...] = (1, 2)
-    """Powers k of (τ / T)^k the time basis is widened by, once, when ``widen_after_legs``
-    legs in a row ran their whole horizon (see :meth:`QLearningController.widen_time_basis`).
+    variant: Variant = setting(Variant.NOMINAL, doc='nominal | robust | open_loop')
+    horizon: float = setting(10.0, unit='s', **_POSITIVE,
+                             doc='T, the finite horizon of every leg (RRT-QX (2))')
+    dt: float = setting(STEP_S, unit='s', **_POSITIVE, doc='Δt, the control period and '
+                        'integral-reinforcement interval (RRT-QX (17))')
+    M: Any = setting(10.0, rows='n', doc='state weight, n x n (or scalar), cost units per '
+                     '(state unit)^2')
+    R: Any = setting(2.0, rows='m', doc='control weight, m x m (or scalar), cost units per '
+                     'N^2; also the fixed Q_uu')
+    P_T: Any = setting(0.5, rows='n', doc='terminal Riccati matrix P(T), n x n (or scalar)')
+    critic_law: CriticLaw = setting(CriticLaw.LEAST_SQUARES, doc='least_squares | gradient')
+    actor_law: ActorLaw = setting(ActorLaw.WHITENED, doc='whitened | gradient')
+    alpha_c: float | None = setting(None, unit='1/s', **_POSITIVE,
+                                    doc='critic gain α_c (gradient law); None: Gains()')
+    alpha_a: float | None = setting(None, unit='1/s', **_POSITIVE, doc='control-actor gain '
+                                    'α_a (RRT-QX (23)); None: Gains()')
+    alpha_d: float | None = setting(None, unit='1/s', **_POSITIVE, doc='disturbance-actor '
+                                    'gain α_d (ACC (23)), robust variant; None: Gains()')
+    actor_warmup_legs: int = setting(1, low=0, doc='legs during which the actors stay at '
+                                     'their initial weights while the critic learns')
+    gamma: float | None = setting(None, **_POSITIVE, doc='attenuation level γ, cost units per '
+                                  'disturbance unit; required by the robust variant')
+    rho: float = setting(0.15, low=0.0, low_open=True, high=1.0, high_open=True,
+                         doc='admissible window ρ of the terminal-state evaluation '
+                         'D <= ρ D0 (RRT-QX (4)-(5))')
+    time_rates: tuple[float, ...] = setting((0.0, 0.5, 1.0, 2.0), unit='1/s', low=0.0,
+                                            doc='decay rates λ_l of the time basis '
+                                            'φ_l(τ) = exp(-λ_l τ); the first must be 0')
+    """The first rate must be 0 (the constant function, which carries the fixed Q̂_uu = R)."""
+    time_powers: tuple[int, ...] = setting((), low=1, doc='powers k of polynomial time '
+                                           'functions (τ / T)^k appended to the exponentials')
+    widen_powers: tuple[int, ...] = setting((1, 2), low=1, doc='powers k of (τ / T)^k the time '
+                                            'basis is widened by, once, after '
+                                            'widen_after_legs legs ran their whole horizon')
+    """See :meth:`QLearningController.widen_time_basis`.
 
     The value of a policy that leaves the robot away from its target grows in τ (the zero
     policy on the rover without a spring: linearly), which no sum of decaying exponentials
@@ -110,62 +136,67 @@ class ControllerConfig:
     with the exponentials and cost accuracy when the plant needs none (the paper's rover,
     small probing: gain error 0.47 instead of 0.08). Empty never widens.
     """
-    widen_after_legs: int = 2
-    """Legs in a row that end by running out of horizon after which the basis is widened."""
-    probing_std: float = 20.0
-    """Standard deviation of the control probing noise on the first leg, N."""
-    probing_decay: float = 0.85
-    """Factor applied to the probing standard deviation after every leg (the schedule)."""
-    probing_floor: float = 0.0
-    """Lower bound of the probing standard deviation, N."""
-    probing_correlation: float = 1.0
-    """Correlation time of the probing noise (Ornstein-Uhlenbeck), s; 0 gives white noise.
-
-    Slow probing moves the robot (excites velocities) where white noise at 1/Δt averages
-    out in the plant; the off-policy critic needs no whiteness.
-    """
-    disturbance_probing_std: float = 0.1
-    """Standard deviation of the disturbance-actor probing noise on the first leg (robust)."""
-    initial_gain: tuple[tuple[float, ...], ...] | None = None
-    """K̂0 (m x n rows), the actor's initial gain, û = -K̂0 x̄ (N per state unit); None = 0.
-
-    Policy evaluation needs a policy whose value the time basis can represent: on a plant
+    widen_after_legs: int = setting(2, low=1, doc='legs in a row that end by running out of '
+                                    'horizon after which the basis is widened')
+    probing_std: float = setting(20.0, unit='N', low=0.0, doc='standard deviation of the '
+                                 'control probing noise on the first leg')
+    probing_decay: float = setting(0.85, low=0.0, low_open=True, high=1.0, doc='factor '
+                                   'applied to the probing standard deviation after every leg')
+    probing_floor: float = setting(0.0, unit='N', low=0.0,
+                                   doc='lower bound of the probing standard deviation')
+    probing_correlation: float = setting(1.0, unit='s', low=0.0, doc='correlation time of the '
+                                         'probing noise (Ornstein-Uhlenbeck); 0: white noise')
+    """Slow probing moves the robot (excites velocities) where white noise at 1/Δt averages
+    out in the plant; the off-policy critic needs no whiteness."""
+    disturbance_probing_std: float = setting(0.1, low=0.0, doc='standard deviation of the '
+                                             'disturbance-actor probing noise on the first '
+                                             'leg (robust)')
+    initial_gain: tuple[tuple[float, ...], ...] | None = setting(
+        None, rows='m', doc="K0 (m x n), the actor's initial gain, u = -K0 x_bar (N per state "
+        'unit); None: 0')
+    """Policy evaluation needs a policy whose value the time basis can represent: on a plant
     that is not stable by itself (the rover without a spring) give a PD gain brisk enough
     to reach the window D <= ρ D0 within T (e.g. 40 N/m, 30 N s/m for the 40 kg rover); a
     sluggish one (10 N/m, 20 N s/m) runs whole horizons, its value varies on time scales
     the basis lacks, and the critic's fit of it is not trusted (see policy_evaluation).
     """
-    critic_memory: int = 2000
-    """Least squares: number of stored Δt samples the critic is fitted to (a window)."""
-    evaluation_period: float = 2.0
-    """Least squares: time between policy evaluations within a leg, s (also at leg starts)."""
-    ridge: float = 1e-6
-    """Least squares: ridge weight, relative to the mean diagonal of the normal matrix."""
-    stability_delta: float = 1.0
-    """δ, δ1, δ2 of the stability bounds (RRT-QX (25), ACC Theorem 2): constants of unity order."""
+    critic_memory: int = setting(2000, low=1, doc='least squares: number of stored Δt samples '
+                                 'the critic is fitted to (a window)')
+    evaluation_period: float = setting(2.0, unit='s', **_POSITIVE, doc='least squares: time '
+                                       'between policy evaluations within a leg (also at leg '
+                                       'starts)')
+    ridge: float = setting(1e-6, low=0.0, doc='least squares: ridge weight, relative to the '
+                           'mean diagonal of the normal matrix')
+    stability_delta: float = setting(1.0, **_POSITIVE, doc='δ, δ1, δ2 of the stability bounds '
+                                     '(RRT-QX (25), ACC Theorem 2): constants of unity order')
+    forces: tuple[tuple[float, float, float], ...] = setting(
+        (), columns=3, doc='open_loop: the force profile, rows [t (s), f_x (N), f_y (N)], '
+        'piecewise constant from each t')
+    goal: tuple[float, float] = setting((0.0, 0.0), unit='m', doc="open_loop: the run's goal, "
+                                        'its leg target (D and D0 are measured to it)')
+    stale_timeout_s: float = setting(0.5, unit='s', low=0.0, doc='paced mode: wall time '
+                                     'without odometry after which the controller commands '
+                                     'zero force')
 
     def __post_init__(self) -> None:
-        if self.horizon <= 0 or self.dt <= 0 or self.dt >= self.horizon:
+        check(self)
+        if self.dt >= self.horizon:
             raise ValueError('need 0 < dt < horizon')
         if not self.time_rates or self.time_rates[0] != 0.0:
             raise ValueError('time_rates must start with 0.0 (the constant function)')
-        if any(r < 0 for r in self.time_rates):
-            raise ValueError('time_rates must be non-negative')
-        if any(int(k) != k or k < 1 for k in (*self.time_powers, *self.widen_powers)):
+        if any(int(k) != k for k in (*self.time_powers, *self.widen_powers)):
             raise ValueError('time_powers and widen_powers must be integers >= 1')
-        if self.critic_memory < 1 or self.evaluation_period <= 0:
-            raise ValueError('critic_memory >= 1 and evaluation_period > 0 required')
-        if not 0 < self.rho < 1:
-            raise ValueError('rho must be in (0, 1)')
-        if min(self.alpha_a, self.alpha_c, self.alpha_d, self.gamma) <= 0:
-            raise ValueError('gains and gamma must be positive')
-        if self.probing_std < 0 or self.probing_floor < 0 or not 0 < self.probing_decay <= 1:
-            raise ValueError('probing noise: std, floor >= 0 and decay in (0, 1]')
+        if self.variant is Variant.ROBUST and self.gamma is None:
+            raise ValueError('gamma is required for the robust variant')
+
+    @property
+    def gains(self) -> Gains:
+        """The gains in use: those given, the controller's choice for the others."""
+        given = {name: getattr(self, name) for name in ('alpha_c', 'alpha_a', 'alpha_d')}
+        return Gains(**{name: value for name, value in given.items() if value is not None})
 
     def expanded(self, n: int, m: int) -> ControllerConfig:
         """Return a copy whose M, R, P_T are full, validated, read-only matrices."""
-        from dataclasses import replace
-
         M = _matrix(self.M, n, 'M')
         R = _matrix(self.R, m, 'R')
         P_T = _matrix(self.P_T, n, 'P_T')

@@ -32,7 +32,7 @@ class GradientCritic:
 
     def __init__(self, theta0: Array, config: ControllerConfig) -> None:
         self.theta = theta0.astype(float).copy()
-        self._gain = config.alpha_c * config.dt
+        self._gain = config.gains.alpha_c * config.dt
 
     def update(self, sig: Array, k: Array) -> None:
         """Apply one Euler step of (22) for rows σ (R, K) with errors e = σθ + k."""

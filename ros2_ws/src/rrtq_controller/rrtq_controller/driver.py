@@ -1,19 +1,25 @@
 """What the controller node runs each step: plan -> legs -> force (no rclpy).
 
+A :class:`Driver` is one controller variant behind the node: it adopts a plan when its
+stamp changes, refuses non-finite odometry (zero force, nothing learned from it), and
+keeps the paced-mode watchdog that stops pushing when the odometry goes stale.
 ``LearningDriver`` walks the planner's waypoints leg by leg (RRT-QX Algorithm 1) with
-the Q-learning controller; ``OpenLoopDriver`` plays a scripted force profile. Both
-take the full measured state and return a :class:`ControlOutput` for the node to
-publish.
+the Q-learning controller; ``OpenLoopDriver`` plays a scripted force profile.
+:func:`make_driver` picks the driver of a :class:`Variant` (:data:`DRIVERS`).
 """
 
 from __future__ import annotations
 
+import abc
 import dataclasses
+import enum
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .config import ControllerConfig
+from rrtq_common.lockstep import OnChange
+
+from .config import ControllerConfig, Variant
 from .legs import LegEvent, LegSequencer
 from .open_loop import ForceProfile
 from .q_learning import QLearningController
@@ -40,16 +46,106 @@ class ControlOutput:
     critic_error: float
     terminal_error: float
     event: str                        # LegEvent value, or 'no_plan'
+    time_rates: tuple[float, ...] = ()   # the critic's time basis (learning variants)
+    time_powers: tuple[int, ...] = ()
 
 
-class LearningDriver:
+class Watch(enum.Enum):
+    """What the odometry watchdog found (paced mode)."""
+
+    FRESH = 'fresh'
+    """Odometry is arriving (or no step was answered yet): nothing to do."""
+    WENT_STALE = 'went_stale'
+    """No odometry for longer than the timeout, for the first time: command zero."""
+    STALE = 'stale'
+    """Still no odometry: keep commanding zero."""
+
+
+class Driver(abc.ABC):
+    """A controller variant as the node drives it, step by step.
+
+    Parameters
+    ----------
+    config : ControllerConfig
+    n, m, q : int
+        State, input and disturbance dimensions.
+    rng : numpy.random.Generator
+        Source of the probing noise.
+    """
+
+    def __init__(self, config: ControllerConfig, n: int, m: int, q: int,
+                 rng: np.random.Generator) -> None:
+        self.config = config
+        self.n, self.m, self.q = n, m, q
+        self._plan_stamp = -1
+        self._last_odometry: float | None = None
+        self._answered = False
+        self.stale = False
+
+    @property
+    def warnings(self) -> list[str]:
+        """What the node should warn about at start (gains against the stability bounds)."""
+        return []
+
+    @abc.abstractmethod
+    def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> None:
+        """Adopt the planner's waypoints (the robot's next waypoint first, the goal last)."""
+
+    @abc.abstractmethod
+    def step(self, t: float, x: ArrayLike, d_applied: ArrayLike | None = None) -> ControlOutput:
+        """The force for the step at ``t`` (s) from the full measured state ``x``."""
+
+    def control(self, t: float, x: ArrayLike, plan: OnChange[Array] | None,
+                disturbance: ArrayLike | None) -> ControlOutput | None:
+        """One step: adopt a plan that changed, then :meth:`step`.
+
+        None for non-finite odometry: the node commands zero, and nothing is learned.
+        A non-finite disturbance measurement is not used.
+        """
+        self._answered = True
+        state = np.asarray(x, dtype=float)
+        if not np.all(np.isfinite(state)):
+            return None
+        if plan is not None and plan.stamp_ns != self._plan_stamp:
+            self._plan_stamp = plan.stamp_ns
+            self.set_plan(plan.read(), state, t)
+        d = None
+        if disturbance is not None and np.all(np.isfinite(disturbance)):
+            d = np.asarray(disturbance, dtype=float)
+        return self.step(t, state, d)
+
+    def odometry_arrived(self, wall: float) -> bool:
+        """Note odometry at wall time ``wall`` (s); True when it ends a stale spell."""
+        self._last_odometry = wall
+        resumed, self.stale = self.stale, False
+        return resumed
+
+    def watch(self, wall: float) -> Watch:
+        """Paced mode, like Nav2's collision monitor on a timed-out source: stop pushing
+        when the odometry has gone stale (the state the command was for is unknown)."""
+        if self._last_odometry is None or not self._answered:
+            return Watch.FRESH
+        if wall - self._last_odometry <= self.config.stale_timeout_s:
+            return Watch.FRESH
+        if self.stale:
+            return Watch.STALE
+        self.stale = True
+        return Watch.WENT_STALE
+
+
+class LearningDriver(Driver):
     """Leg sequencing (RRT-QX (4)-(5)) around the Q-learning controller."""
 
     def __init__(self, config: ControllerConfig, n: int, m: int, q: int,
                  rng: np.random.Generator) -> None:
+        super().__init__(config, n, m, q, rng)
         self.controller = QLearningController(config, n, m, q, rng)
         self.legs = LegSequencer(config.rho, config.horizon, n)
-        self.n, self.m = n, m
+
+    @property
+    def warnings(self) -> list[str]:
+        """The configured gains that violate a stability bound."""
+        return self.controller.warnings
 
     def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> None:
         """Adopt the planner's waypoints (the robot's next waypoint first, the goal last).
@@ -95,16 +191,18 @@ class LearningDriver:
             probing=np.asarray(c.info.probing if c.info.probing.size else np.zeros(self.m)),
             critic_weights=c.critic_weights, actor_weights=c.actor_weights,
             disturbance_weights=c.disturbance_weights if c.robust else empty,
-            critic_error=float(c.info.e_c1), terminal_error=float(c.info.e_c2), event=event)
+            critic_error=float(c.info.e_c1), terminal_error=float(c.info.e_c2), event=event,
+            time_rates=tuple(c.time_basis.rates), time_powers=tuple(c.time_basis.powers))
 
 
-class OpenLoopDriver:
+class OpenLoopDriver(Driver):
     """The scripted force profile; the 'leg' is the whole run toward the goal."""
 
-    def __init__(self, profile: ForceProfile, goal: ArrayLike, horizon: float) -> None:
-        self.profile = profile
-        self.goal = np.asarray(goal, dtype=float)
-        self.horizon = horizon
+    def __init__(self, config: ControllerConfig, n: int, m: int, q: int,
+                 rng: np.random.Generator) -> None:
+        super().__init__(config, n, m, q, rng)
+        self.profile = ForceProfile.from_rows(config.forces)
+        self.goal = np.asarray(config.goal, dtype=float)
         self.x0: Array | None = None
 
     def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> None:
@@ -120,7 +218,21 @@ class OpenLoopDriver:
         return ControlOutput(
             u=u, leg_index=0, leg_start_time=0.0, leg_start=self.x0[:2].copy(),
             leg_target=self.goal.copy(), d0=float(np.linalg.norm(self.x0 - target)),
-            d=float(np.linalg.norm(x - target)), time_to_go=max(0.0, self.horizon - t),
+            d=float(np.linalg.norm(x - target)), time_to_go=max(0.0, self.config.horizon - t),
             probing=np.zeros(u.size), critic_weights=empty, actor_weights=empty,
             disturbance_weights=empty, critic_error=0.0, terminal_error=0.0,
             event=LegEvent.CONTINUE.value)
+
+
+DRIVERS: dict[Variant, type[Driver]] = {
+    Variant.NOMINAL: LearningDriver,
+    Variant.ROBUST: LearningDriver,
+    Variant.OPEN_LOOP: OpenLoopDriver,
+}
+"""The driver of each controller variant: a new variant registers its own here."""
+
+
+def make_driver(config: ControllerConfig, n: int, m: int, q: int,
+                rng: np.random.Generator) -> Driver:
+    """The driver of ``config.variant``."""
+    return DRIVERS[config.variant](config, n, m, q, rng)

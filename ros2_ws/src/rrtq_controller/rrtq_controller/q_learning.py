@@ -51,12 +51,15 @@ class QLearningController:
                  rng: np.random.Generator) -> None:
         self.config = config.expanded(n, m)
         self.robust = self.config.variant is Variant.ROBUST
+        self.gains = self.config.gains
+        self.gamma = self.config.gamma if self.robust and self.config.gamma is not None else 0.0
+        """Attenuation level γ of the game (0 in the nominal variant: d is empty there)."""
         self.n, self.m, self.q = n, m, (q if self.robust else 0)
         self._rng = rng
         self.time_basis = TimeBasis(self.config.time_rates, self.config.time_powers, self.config.horizon)
         self.basis = QuadraticBasis(n, m, self.q)
         L, b = self.time_basis.size, self.basis
-        self._fixed_w = b.fixed_weights(self.config.R, self.config.gamma if self.robust else None)
+        self._fixed_w = b.fixed_weights(self.config.R, self.gamma if self.robust else None)
         self._free_xu = np.searchsorted(b.free, b.xu)
         self._free_xd = np.searchsorted(b.free, b.xd)
         self.critic = make_critic(np.zeros(L * b.free.size), self.config, n, m, self.q)
@@ -266,12 +269,12 @@ class QLearningController:
         P = Q[:n, :n] - Qux.T @ self._Rinv @ Qux
         if self.robust:
             Qdx = self._cross(phi, 'd')
-            P = P + self.config.gamma**-2 * Qdx.T @ Qdx
+            P = P + self.gamma**-2 * Qdx.T @ Qdx
         return 0.5 * (P + P.T)
 
     def _rows(self, *batch: Array) -> tuple[Array, Array, Array, Array]:
         c = self.config
-        pol = Policy(self._Wa, self._Wd, c.M, c.R, c.P_T, c.gamma, self.time_basis)
+        pol = Policy(self._Wa, self._Wd, c.M, c.R, c.P_T, self.gamma, self.time_basis)
         return bellman_rows(self.basis, pol, self._fixed_w, c.dt, *batch)
 
     def actor_update(self, phi: Array, x: Array) -> Array:
@@ -285,14 +288,14 @@ class QLearningController:
         """
         e_a = self._Wa.T @ _features(phi, x) + self._Rinv @ (self._cross(phi, 'u') @ x)
         target = -self._greedy('u').T
-        self._Wa = self._actor_step(self._Wa, target, phi, x, e_a, self.config.alpha_a)
+        self._Wa = self._actor_step(self._Wa, target, phi, x, e_a, self.gains.alpha_a)
         return e_a
 
     def disturbance_actor_update(self, phi: Array, x: Array) -> Array:
         """Disturbance-actor step, ACC (23): e_d = Ŵdᵀ z + Q̂_dd⁻¹ Q̂_dx(τ) x̄, Q̂_dd = -γ² I."""
-        e_d = self._Wd.T @ _features(phi, x) - self.config.gamma ** -2 * (self._cross(phi, 'd') @ x)
-        target = self.config.gamma ** -2 * self._greedy('d').T
-        self._Wd = self._actor_step(self._Wd, target, phi, x, e_d, self.config.alpha_d)
+        e_d = self._Wd.T @ _features(phi, x) - self.gamma ** -2 * (self._cross(phi, 'd') @ x)
+        target = self.gamma ** -2 * self._greedy('d').T
+        self._Wd = self._actor_step(self._Wd, target, phi, x, e_d, self.gains.alpha_d)
         return e_d
 
     def _actor_step(self, W: Array, target: Array, phi: Array, x: Array, err: Array, alpha: float) -> Array:

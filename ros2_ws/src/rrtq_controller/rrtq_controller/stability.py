@@ -54,11 +54,11 @@ def gain_bounds(ctrl: QLearningController, samples: int = 21) -> GainBounds:
         cross = float(np.linalg.eigvalsh(Qxu @ Qxu.T).max())
         if ctrl.robust:
             Qxd = ctrl._cross(phi, 'd').T
-            S = S - c.gamma**-2 * Qxd @ Qxd.T
+            S = S - ctrl.gamma**-2 * Qxd @ Qxd.T
             num = float(np.linalg.eigvalsh(S).min()) - cross
             if np.any(Qxd):  # undetermined until the critic has learned something
                 gram = float(np.linalg.eigvalsh(Qxd.T @ Qxd).min())
-                bound_d = min(bound_d, gram / (delta * norm * c.gamma**-2))
+                bound_d = min(bound_d, gram / (delta * norm * ctrl.gamma**-2))
         else:
             num = 2.0 * float(np.linalg.eigvalsh(S).min()) - cross
         bound_a = min(bound_a, num / (delta * norm * r_inv))
@@ -67,20 +67,20 @@ def gain_bounds(ctrl: QLearningController, samples: int = 21) -> GainBounds:
 
 def gain_warnings(ctrl: QLearningController) -> list[str]:
     """Human-readable warnings for every configured gain that violates a bound."""
-    c = ctrl.config
+    c, g = ctrl.config, ctrl.gains
     out: list[str] = []
     bounds = gain_bounds(ctrl)
     law = 'ACC Theorem 2' if ctrl.robust else 'RRT-QX (25)'
-    if not 0 < c.alpha_a < bounds.alpha_a:
-        out.append(f'alpha_a = {c.alpha_a:g} violates {law}: need 0 < alpha_a < {bounds.alpha_a:.4g}')
-    if ctrl.robust and not 0 < c.alpha_d < bounds.alpha_d:
-        out.append(f'alpha_d = {c.alpha_d:g} violates ACC Theorem 2: need 0 < alpha_d < {bounds.alpha_d:.4g}'
+    if not 0 < g.alpha_a < bounds.alpha_a:
+        out.append(f'alpha_a = {g.alpha_a:g} violates {law}: need 0 < alpha_a < {bounds.alpha_a:.4g}')
+    if ctrl.robust and not 0 < g.alpha_d < bounds.alpha_d:
+        out.append(f'alpha_d = {g.alpha_d:g} violates ACC Theorem 2: need 0 < alpha_d < {bounds.alpha_d:.4g}'
                    ' (with the current critic estimate of Q_xd)')
     if c.critic_law is CriticLaw.GRADIENT:
-        if c.alpha_c < 10.0 * max(c.alpha_a, c.alpha_d if ctrl.robust else 0.0):
-            out.append(f'alpha_c = {c.alpha_c:g} is not >> the actor gains (want >= 10x)')
-        if c.alpha_c * c.dt >= 4.0:
-            out.append(f'alpha_c * dt = {c.alpha_c * c.dt:g} >= 4: the normalised critic step can overshoot')
-    if c.alpha_a * c.dt >= 2.0 or (ctrl.robust and c.alpha_d * c.dt >= 2.0):
+        if g.alpha_c < 10.0 * max(g.alpha_a, g.alpha_d if ctrl.robust else 0.0):
+            out.append(f'alpha_c = {g.alpha_c:g} is not >> the actor gains (want >= 10x)')
+        if g.alpha_c * c.dt >= 4.0:
+            out.append(f'alpha_c * dt = {g.alpha_c * c.dt:g} >= 4: the normalised critic step can overshoot')
+    if g.alpha_a * c.dt >= 2.0 or (ctrl.robust and g.alpha_d * c.dt >= 2.0):
         out.append('alpha_a * dt or alpha_d * dt >= 2: the normalised actor step is unstable')
     return out

@@ -1,27 +1,12 @@
 """DESIGN.md's claimed facts about the controller, checked against the true plants."""
 
-import importlib.util
-import sys
-from pathlib import Path
-
 import numpy as np
 
 from rrtq_controller.basis import TimeBasis
 from rrtq_controller.config import ControllerConfig
 from rrtq_controller.q_learning import QLearningController
+from rrtq_testing import controller_reference as ref
 
-
-def _reference():
-    name = 'rrtq_controller_reference'
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name('test_reference.py'))
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules[name]
-
-
-ref = _reference()
 M, P_T = 10.0 * np.eye(4), 0.5 * np.eye(4)
 
 

@@ -1,28 +1,13 @@
 """The Q-learning core against the Riccati optimum (the true matrices known to the test only)."""
 
 import dataclasses
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
 from rrtq_controller.config import ControllerConfig, CriticLaw, Variant
 from rrtq_controller.q_learning import QLearningController
-
-
-def _reference():
-    name = 'rrtq_controller_reference'
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, Path(__file__).with_name('test_reference.py'))
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules[name]
-
-
-ref = _reference()
+from rrtq_testing import controller_reference as ref
 M, P_T, T, DT = 10.0 * np.eye(4), 0.5 * np.eye(4), 10.0, 0.05
 PD = ((40.0, 0.0, 30.0, 0.0), (0.0, 40.0, 0.0, 30.0))  # brisk initial PD gain, N/m and N s/m
 NOSPRING = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=PD)

@@ -6,6 +6,8 @@ import enum
 import math
 from dataclasses import dataclass
 
+from rrtq_common.settings import check, setting
+
 FILL_FRACTION = 0.5
 """Past ``max_nodes``, a sample is kept only this fraction of r(n) or farther from every node."""
 
@@ -61,35 +63,30 @@ class RRTXConfig:
         bounded size.  None: no limit.
     """
 
-    goal: tuple[float, float]
-    bounds: tuple[float, float, float, float]
-    steer_distance: float = 5.0
-    epsilon: float = 0.0
-    ball_constant: float | None = None
-    free_space_measure: float | None = None
-    robot_radius: float = 0.0
-    robot_sample_probability: float = 0.05
-    reach_tolerance: float = 1e-3
-    max_nodes: int | None = None
+    goal: tuple[float, float] = setting(unit="m", doc="goal position, the root of the tree")
+    bounds: tuple[float, float, float, float] = setting(
+        unit="m", doc="sampling region x_min x_max y_min y_max")
+    steer_distance: float = setting(5.0, unit="m", low=0.0, low_open=True,
+                                    doc="RRT^X steer distance delta")
+    epsilon: float = setting(0.0, unit="m", low=0.0, doc="RRT^X epsilon-consistency")
+    ball_constant: float | None = setting(None, unit="m", low=0.0, low_open=True,
+                                          doc="gamma of r(n); None: from the free space")
+    free_space_measure: float | None = setting(None, unit="m^2", low=0.0, low_open=True,
+                                               doc="mu(X_free); None: the area of bounds")
+    robot_radius: float = setting(0.0, unit="m", low=0.0,
+                                  doc="samples keep this distance from the border")
+    robot_sample_probability: float = setting(0.05, low=0.0, high=1.0,
+                                              doc="chance an iteration samples the robot")
+    reach_tolerance: float = setting(1e-3, unit="m", low=0.0,
+                                     doc="v_bot moves on to its parent this close")
+    max_nodes: int | None = setting(None, low=2, doc="past this size the graph only fills "
+                                    "gaps; None: no limit")
 
     def __post_init__(self) -> None:
+        check(self)
         x0, x1, y0, y1 = self.bounds
         if not (x1 - x0 > 2 * self.robot_radius and y1 - y0 > 2 * self.robot_radius):
             raise ValueError("bounds must be non-empty after shrinking by robot_radius")
-        if self.steer_distance <= 0:
-            raise ValueError("steer_distance must be > 0")
-        if self.epsilon < 0:
-            raise ValueError("epsilon must be >= 0")
-        if self.ball_constant is not None and self.ball_constant <= 0:
-            raise ValueError("ball_constant must be > 0")
-        if self.free_space_measure is not None and self.free_space_measure <= 0:
-            raise ValueError("free_space_measure must be > 0")
-        if self.robot_radius < 0 or self.reach_tolerance < 0:
-            raise ValueError("robot_radius and reach_tolerance must be >= 0")
-        if not 0.0 <= self.robot_sample_probability <= 1.0:
-            raise ValueError("robot_sample_probability must be in [0, 1]")
-        if self.max_nodes is not None and self.max_nodes < 2:
-            raise ValueError("max_nodes must be >= 2")
 
     @property
     def gamma(self) -> float:

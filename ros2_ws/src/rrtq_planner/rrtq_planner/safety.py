@@ -19,7 +19,12 @@ import numpy.typing as npt
 import shapely
 from shapely.geometry import Polygon
 
-from rrtq_sim.polygon_set import PolygonSet
+from rrtq_common.lockstep import OnChange
+from rrtq_common.polygon_set import LivePolygons, PolygonSet
+from rrtq_common.settings import check, setting
+from rrtq_common.world import TrueObstacles
+
+Obstacles = list[tuple[str, np.ndarray]]
 
 # m: how far outside a grown obstacle the robot is kept when the margin is capped.
 KEEP_OUT = 0.05
@@ -84,21 +89,71 @@ def augment(polygon: npt.ArrayLike, margin: float) -> np.ndarray:
 
 @dataclasses.dataclass(frozen=True)
 class SafetyConfig:
-    """Parameters of the safety monitor."""
+    """Parameters of the safety monitor (the margin is the paper's: the running maximum)."""
 
-    robot_radius: float = 0.0        # m, added to every margin
-    growth_threshold: float = 0.05   # m; the augmented set is republished when the margin
-    #                                  has grown by at least this since the last publication
+    robot_radius: float = setting(0.0, unit='m', low=0.0, doc='added to every margin')
+    growth_threshold: float = setting(0.05, unit='m', low=0.0, doc='the augmented set is '
+                                      'republished when the margin has grown by at least this '
+                                      'since the last publication')
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+@dataclasses.dataclass(frozen=True)
+class Leg:
+    """The controller's current leg, as its state reports it."""
+
+    index: int
+    start: tuple[float, float]     # m
+    target: tuple[float, float]    # m
+    d0: float                      # m; 0 while the controller has no plan
+
+
+@dataclasses.dataclass(frozen=True)
+class SafetyStep:
+    """One step of :meth:`SafetyMonitor.step`: what the safety node publishes and logs."""
+
+    augmented: Obstacles | None
+    """The detected obstacles grown by the margin, when they are to be republished."""
+    augmented_stamp_ns: int
+    """Stamp of the latest augmented set published."""
+    d_rob: float
+    d_rob_max: float
+    margin: float
+    clearance: float
+    """m, from the robot's disc to the nearest true obstacle (< 0: overlap; inf: none)."""
+    nearest: str
+    """Id of that obstacle ('' when there is none)."""
+    collision: bool
+    """A collision happened at this step or before (latched)."""
+    new_collision: bool
+    """The collision happened at this step."""
+    leg_index: int
 
 
 class SafetyMonitor:
-    """Running maximum of D_rob and the margin obstacles are grown by."""
+    """Running maximum of D_rob, the margin obstacles are grown by, and the true clearance.
 
-    def __init__(self, config: SafetyConfig) -> None:
+    Parameters
+    ----------
+    config : SafetyConfig
+    truth : TrueObstacles, optional
+        What physically exists (for the clearance and the collision flag of :meth:`step`).
+    """
+
+    def __init__(self, config: SafetyConfig, truth: TrueObstacles | None = None) -> None:
         self.config = config
+        self.truth = truth
         self.d_rob = 0.0
         self.d_rob_max = 0.0
         self.published_margin: float | None = None
+        self.collided = False
+        self._detected: Obstacles = []
+        self._detected_stamp: int | None = None
+        self._published = PolygonSet([])
+        self._augmented_stamp = 0
+        self._existing = LivePolygons()
 
     @property
     def margin(self) -> float:
@@ -132,6 +187,50 @@ class SafetyMonitor:
                 margin = min(margin, max(gap - KEEP_OUT, 0.0))
             out.append((oid, augment(poly, margin)))
         return out
+
+    def step(self, stamp_ns: int, position: npt.ArrayLike, detected: OnChange[Obstacles] | None,
+             leg: Leg | None) -> SafetyStep:
+        """One step (RRT-QX §5): measure D_rob on the current leg, republish the augmented
+        set when the margin has grown, the detected set changed or a grown obstacle would
+        swallow the robot, and check the true clearance.
+
+        Parameters
+        ----------
+        stamp_ns : int
+            The step, ns of sim time.
+        position : array_like, shape (2,)
+            The robot, m.
+        detected : OnChange, optional
+            The robot's map (id, polygon) as last published (None: none yet).
+        leg : Leg, optional
+            The controller's leg of the step before (None: none yet).
+        """
+        p = np.asarray(position, dtype=float)[:2]
+        changed = detected is not None and detected.stamp_ns != self._detected_stamp
+        if detected is not None and changed:
+            self._detected_stamp = detected.stamp_ns
+            self._detected = detected.read()
+        grown = False
+        if leg is not None and leg.d0 > 0.0:
+            grown = self.update(leg.start, leg.target, p)
+        swallowed = self._published.nearest(p)[0] < 0.0
+        augmented = None
+        if changed or grown or swallowed or self.published_margin is None:
+            self._augmented_stamp = stamp_ns
+            augmented = self.augmented(self._detected, p)
+            self._published = PolygonSet([poly for _, poly in augmented])
+        gap, nearest = math.inf, ''
+        if self.truth is not None:
+            existing = self.truth.update(p, stamp_ns * 1e-9)
+            gap, index = clearance(p, self._existing.update(existing), self.config.robot_radius)
+            nearest = existing[index].id if index >= 0 else ''
+        new_collision = gap < 0.0 and not self.collided
+        self.collided = self.collided or new_collision
+        return SafetyStep(
+            augmented=augmented, augmented_stamp_ns=self._augmented_stamp, d_rob=self.d_rob,
+            d_rob_max=self.d_rob_max, margin=self.margin, clearance=float(gap),
+            nearest=nearest, collision=self.collided, new_collision=new_collision,
+            leg_index=leg.index if leg is not None and leg.d0 > 0.0 else 0)
 
 
 def clearance(position: npt.ArrayLike, polygons: PolygonSet | Sequence[np.ndarray],

@@ -1,27 +1,14 @@
 """Otte's bottleneck experiment (BNeck.txt): replanning when the plug vanishes."""
 
-import pathlib
-
 import numpy as np
 
 from rrtq_planner.rrtx import RRTX, PlanStatus, RRTXConfig
+from rrtq_testing.paths import OTTE, read_otte
 
-DATA = pathlib.Path(__file__).parent / "data"
+DATA = OTTE
 RADIUS = 0.5
 ROBOT = (0.0, 40.0)
 GOAL = (0.0, -40.0)
-
-
-def read_otte(path):
-    rows = [r.strip() for r in path.read_text().splitlines() if r.strip()]
-    polys, i = [], 1
-    for _ in range(int(rows[0])):
-        k = int(rows[i])
-        polys.append(np.array([[float(v) for v in r.split(",")] for r in rows[i + 1 : i + 1 + k]]))
-        i += 1 + k
-        if i < len(rows) and rows[i] in ("0", "1", "-1"):
-            i += 1
-    return polys
 
 
 def grown_box(poly, r):

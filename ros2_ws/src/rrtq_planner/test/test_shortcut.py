@@ -1,31 +1,18 @@
 """Path shortening: never longer, never colliding, and taut where the optimum is known."""
 
-import importlib.util
 import math
-import pathlib
 
 import numpy as np
 import pytest
 from shapely.geometry import LineString, Polygon
 
 from rrtq_planner.geometry import ObstacleMap, points_in_polygon
-from rrtq_planner.plan_cli import grow
+from rrtq_planner.routes import grow
 from rrtq_planner.rrtx import RRTX, RRTXConfig
 from rrtq_planner.shortcut import (EdgeSet, ShortcutConfig, Shortener, outward_corners,
                                    path_length, shortcut_vertices, simplify)
+from rrtq_testing import paths as vo
 
-HERE = pathlib.Path(__file__).parent
-
-
-def _helper():
-    spec = importlib.util.spec_from_file_location('visibility_optimum',
-                                                  HERE / 'visibility_optimum.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-vo = _helper()
 SQUARE = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
 
 
@@ -99,7 +86,7 @@ def test_rrtx_paths_get_shorter_and_stay_clear(seed):
 
 
 def test_bneck_detour_becomes_the_optimum():
-    polys = vo.read_otte(HERE / 'data' / 'BNeck.txt')
+    polys = vo.read_otte(vo.OTTE / 'BNeck.txt')
     grown = grow(polys, 0.5)
     # A detour around the right end of the wall, far from taut.
     path = np.array([[0.0, 40.0], [30.0, 20.0], [45.0, 5.0], [45.0, -5.0], [20.0, -30.0],

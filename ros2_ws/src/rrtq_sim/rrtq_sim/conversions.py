@@ -1,81 +1,28 @@
-"""Messages <-> core types for the simulator side (the only module that knows both)."""
+"""Messages <-> core types of the simulator side: the disturbance, the perception status."""
 
 from __future__ import annotations
 
-from collections.abc import Iterable
-
 import numpy as np
-from builtin_interfaces.msg import Time
-from geometry_msgs.msg import Point32, Polygon
-from nav_msgs.msg import Odometry
-from rosgraph_msgs.msg import Clock
-from rrtq_msgs.msg import Disturbance, Obstacle, ObstacleArray
+from std_msgs.msg import Header
+from rrtq_msgs.msg import Disturbance, PerceptionStatus
 
-MAP_FRAME = 'map'
-ROBOT_FRAME = 'base_link'
-
-
-def time_msg(ns: int) -> Time:
-    return Time(sec=ns // 10**9, nanosec=ns % 10**9)
-
-
-def stamp_ns(stamp: Time) -> int:
-    return stamp.sec * 10**9 + stamp.nanosec
-
-
-def clock_msg(ns: int) -> Clock:
-    return Clock(clock=time_msg(ns))
-
-
-def odometry_msg(ns: int, x: np.ndarray) -> Odometry:
-    """Odometry of the planar robot: position and velocity in ``map``.
-
-    The robot has no heading state (a point mass), so ``base_link`` is kept parallel
-    to ``map`` (identity orientation) and the twist, expressed in ``base_link`` per
-    nav_msgs' convention, equals the velocity in ``map``.
-    """
-    msg = Odometry()
-    msg.header.stamp = time_msg(ns)
-    msg.header.frame_id = MAP_FRAME
-    msg.child_frame_id = ROBOT_FRAME
-    msg.pose.pose.position.x = float(x[0])
-    msg.pose.pose.position.y = float(x[1])
-    msg.pose.pose.orientation.w = 1.0
-    msg.twist.twist.linear.x = float(x[2])
-    msg.twist.twist.linear.y = float(x[3])
-    return msg
-
-
-def odometry_state(msg: Odometry) -> np.ndarray:
-    """(p_x, p_y, v_x, v_y) from an odometry message."""
-    return np.array([msg.pose.pose.position.x, msg.pose.pose.position.y,
-                     msg.twist.twist.linear.x, msg.twist.twist.linear.y])
+from rrtq_common.conversions import MAP_FRAME, time_msg
+from rrtq_sim.perception import ObstacleEvent, Observation
 
 
 def disturbance_msg(ns: int, model: str, value: np.ndarray) -> Disturbance:
+    """d (its model named) in ``map`` at ``ns``."""
     msg = Disturbance(model=model, value=[float(v) for v in value])
     msg.header.stamp = time_msg(ns)
     msg.header.frame_id = MAP_FRAME
     return msg
 
 
-def polygon_msg(vertices: np.ndarray) -> Polygon:
-    return Polygon(points=[Point32(x=float(x), y=float(y), z=0.0) for x, y in vertices])
-
-
-def polygon_array(msg: Polygon) -> np.ndarray:
-    return np.array([[p.x, p.y] for p in msg.points], dtype=float).reshape(-1, 2)
-
-
-def obstacle_array_msg(ns: int, obstacles: Iterable[tuple[str, np.ndarray]],
-                       margin: float = 0.0) -> ObstacleArray:
-    msg = ObstacleArray(margin=float(margin), obstacles=[
-        Obstacle(id=oid, polygon=polygon_msg(poly), margin=float(margin))
-        for oid, poly in obstacles])
-    msg.header.stamp = time_msg(ns)
-    msg.header.frame_id = MAP_FRAME
-    return msg
-
-
-def obstacle_array(msg: ObstacleArray) -> list[tuple[str, np.ndarray]]:
-    return [(o.id, polygon_array(o.polygon)) for o in msg.obstacles]
+def perception_status_msg(header: Header, detected_stamp_ns: int, known: int,
+                          seen: Observation) -> PerceptionStatus:
+    """The step's status: the stamp of the latest map, its size, what changed."""
+    return PerceptionStatus(
+        header=header, detected_stamp=time_msg(detected_stamp_ns), known=known,
+        in_range=seen.in_range,
+        detected=[oid for e, oid in seen.events if e is ObstacleEvent.DETECTED],
+        removed=[oid for e, oid in seen.events if e is ObstacleEvent.REMOVED])

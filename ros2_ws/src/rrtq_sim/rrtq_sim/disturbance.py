@@ -4,13 +4,23 @@ from __future__ import annotations
 
 import enum
 import math
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from rrtq_sim.riccati import RiccatiSolution
+from rrtq_common.settings import check, setting
+from rrtq_sim.riccati import RiccatiSolution, solve_riccati
 
-__all__ = ['DisturbanceModel', 'DisturbanceGenerator']
+__all__ = ['DisturbanceModel', 'DisturbanceConfig', 'WorstCaseGame', 'DisturbanceGenerator',
+           'make_generator']
+
+
+def _maxwell_slip() -> np.ndarray:
+    """The paper's Maxwell-slip disturbance column F = [0, 0, -1, 1]^T (4 states)."""
+    f = np.array([[0.0], [0.0], [-1.0], [1.0]])
+    f.setflags(write=False)
+    return f
 
 
 class DisturbanceModel(enum.StrEnum):
@@ -21,6 +31,46 @@ class DisturbanceModel(enum.StrEnum):
     SINUSOID = 'sinusoid'
     GAUSSIAN = 'gaussian'
     WORST_CASE = 'worst_case'
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class DisturbanceConfig:
+    """The disturbance d(t) applied through F."""
+
+    model: DisturbanceModel = setting(DisturbanceModel.NONE, doc='the signal')
+    F: np.ndarray = setting(factory=_maxwell_slip, rows='n',
+                            doc='disturbance matrix F (n x q); default: the Maxwell-slip column')
+    amplitude: float = setting(1.0, doc='constant: the value; sinusoid: the amplitude; '
+                               'gaussian: the std; worst_case: the clip (units of d)')
+    frequency: float = setting(0.2, unit='Hz', low=0.0, doc='sinusoid frequency')
+    gamma: float | None = setting(None, low=0.0, low_open=True,
+                                  doc='worst_case: attenuation level of the game that defines d*')
+
+    def __post_init__(self) -> None:
+        check(self)
+
+    @property
+    def q(self) -> int:
+        """Disturbance dimension."""
+        return int(self.F.shape[1])
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class WorstCaseGame:
+    """The zero-sum game the worst-case disturbance plays: the true plant, the controller's
+    cost weights and horizon (no defaults: the orchestrator hands them over)."""
+
+    A: np.ndarray = setting(rows='n', doc='true state matrix A (n x n)')
+    B: np.ndarray = setting(rows='n', doc='true input matrix B (n x m)')
+    M: np.ndarray = setting(rows='n', doc="controller's state weight M (n x n)")
+    R: np.ndarray = setting(rows='m', doc="controller's control weight R (m x m)")
+    P_T: np.ndarray = setting(rows='n', doc="controller's terminal weight P(T) (n x n)")
+    horizon: float = setting(unit='s', low=0.0, low_open=True, doc='leg horizon T')
+
+    def riccati(self, F: npt.ArrayLike, gamma: float) -> RiccatiSolution:
+        """The game Riccati solution P(τ) over one leg (robust paper eq. 8)."""
+        return solve_riccati(self.A, self.B, self.M, self.R, self.P_T, self.horizon,
+                             F=F, gamma=gamma)
 
 
 class DisturbanceGenerator:
@@ -136,3 +186,28 @@ class DisturbanceGenerator:
         # adversary physically plausible.
         d = self._gain_matrix @ (self._riccati.P(tau) @ x)
         return np.clip(d, -self._amplitude, self._amplitude)
+
+    def value_at(self, t: float, x: npt.ArrayLike, target: npt.ArrayLike | None,
+                 tau: float) -> np.ndarray:
+        """d at ``t`` for the full state ``x`` on a leg to ``target`` (m, at rest).
+
+        The game's state is relative to the leg's target held at rest: its position is
+        subtracted from the first two components. Without a leg (``target`` None) the
+        state is taken as it is, with ``tau``.
+        """
+        xbar = np.array(x, dtype=float).reshape(-1)
+        if target is not None:
+            xbar[:2] -= np.asarray(target, dtype=float)
+        return self.value(t, xbar, tau)
+
+
+def make_generator(config: DisturbanceConfig, rng: np.random.Generator,
+                   game: WorstCaseGame | None = None) -> DisturbanceGenerator:
+    """The generator of ``config`` (worst_case: of ``game`` at ``config.gamma``)."""
+    riccati = None
+    if config.model is DisturbanceModel.WORST_CASE:
+        if game is None or config.gamma is None:
+            raise ValueError('worst_case needs the game and gamma')
+        riccati = game.riccati(config.F, config.gamma)
+    return DisturbanceGenerator(config.model, config.q, config.amplitude, config.frequency, rng,
+                                riccati=riccati, F=config.F, gamma=config.gamma)

@@ -2,22 +2,25 @@
 
 DESIGN.md, Perception: at every step an existing obstacle that intersects the
 perception disc becomes known (added once); a known obstacle that no longer exists is
-removed when its location is inside the disc.  What exists is :class:`TrueObstacles`:
-the scenario's timing, except that nothing appears on top of the robot.
+removed when its location is inside the disc.  What exists is
+:class:`rrtq_common.world.TrueObstacles`: the scenario's timing, except that nothing
+appears on top of the robot.
 """
 
 from __future__ import annotations
 
 import enum
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from rrtq_sim.obstacles import disc_intersects_polygon, point_polygon_distance
-from rrtq_sim.scenario import ObstacleSpec, Scenario
+from rrtq_common.geometry import disc_intersects_polygon
+from rrtq_common.polygon_set import LivePolygons
+from rrtq_common.world import ObstacleSpec, TrueObstacles
 
-__all__ = ['ObstacleEvent', 'Perception', 'TrueObstacles']
+__all__ = ['ObstacleEvent', 'Observation', 'Perception']
 
 
 class ObstacleEvent(enum.StrEnum):
@@ -27,82 +30,18 @@ class ObstacleEvent(enum.StrEnum):
     REMOVED = 'removed'
 
 
-class TrueObstacles:
-    """What physically exists, step by step: the scenario's timing, never on the robot.
+@dataclass(frozen=True)
+class Observation:
+    """One step of :meth:`Perception.observe`: what the spawner node publishes and logs."""
 
-    An obstacle exists from ``appear_at`` until ``vanish_at``, except that one due to
-    appear during the run (``appear_at > 0``) while it is within ``clearance`` of the
-    robot's disc is held back: it appears at the first later step at which the robot is
-    clear of it, and not at all if its ``vanish_at`` comes first. Obstacles there at
-    t = 0 are never held (the scenario loader keeps the start clear of them).
-
-    The spawner, the safety node and the referee each keep one and feed it the same
-    odometry, so they agree on the truth at every step.
-
-    Parameters
-    ----------
-    obstacles : sequence of ObstacleSpec
-        Ground truth, in scenario order.
-    robot_radius : float
-        m (>= 0).
-    clearance : float
-        Smallest gap between the robot's disc and an obstacle that appears, m (>= 0).
-    """
-
-    def __init__(self, obstacles: Sequence[ObstacleSpec], robot_radius: float = 0.0,
-                 clearance: float = 0.0) -> None:
-        for name, value in (('robot_radius', robot_radius), ('clearance', clearance)):
-            if not (np.isfinite(value) and value >= 0.0):
-                raise ValueError(f'{name} must be finite and >= 0, got {value!r}')
-        self._specs = tuple(obstacles)
-        self._reach = float(robot_radius) + float(clearance)
-        self._existing = tuple(spec for spec in self._specs if spec.exists(0.0))
-        self._appeared = {spec.id: 0.0 for spec in self._existing}
-        self._held: frozenset[str] = frozenset()
-
-    @classmethod
-    def for_scenario(cls, scenario: Scenario) -> TrueObstacles:
-        """The truth of a scenario: its obstacles, robot radius and ``appear_clearance``."""
-        return cls(scenario.obstacles, scenario.robot_radius, scenario.appear_clearance)
-
-    @property
-    def existing(self) -> tuple[ObstacleSpec, ...]:
-        """The obstacles that existed at the last update (before any: at t = 0)."""
-        return self._existing
-
-    @property
-    def held(self) -> frozenset[str]:
-        """Ids due to exist at the last update but held back because the robot was near."""
-        return self._held
-
-    @property
-    def appeared_at(self) -> dict[str, float]:
-        """Time (s) each obstacle came to exist so far (later than its appear_at if held)."""
-        return dict(self._appeared)
-
-    def update(self, position: npt.ArrayLike, t: float) -> tuple[ObstacleSpec, ...]:
-        """Advance to time ``t`` (s) with the robot at ``position`` (m).
-
-        Returns
-        -------
-        tuple of ObstacleSpec
-            The obstacles that exist at ``t``, in scenario order.
-        """
-        p = np.asarray(position, dtype=float).reshape(-1)
-        if p.shape != (2,):
-            raise ValueError(f'position must have shape (2,), got {np.shape(position)}')
-        held = []
-        for spec in self._specs:
-            if spec.id in self._appeared or not spec.exists(t):
-                continue
-            if spec.appear_at > 0.0 and point_polygon_distance(p, spec.polygon) <= self._reach:
-                held.append(spec.id)
-            else:
-                self._appeared[spec.id] = t
-        self._held = frozenset(held)
-        self._existing = tuple(spec for spec in self._specs if spec.id in self._appeared
-                               and t < spec.vanish_at)
-        return self._existing
+    events: list[tuple[ObstacleEvent, str]]
+    """The map changes of this step, in scenario order."""
+    held: list[str]
+    """Ids held back from appearing since this step (the robot is within their clearance)."""
+    truth: tuple[ObstacleSpec, ...] | None
+    """What exists, when it changed at this step (None: unchanged)."""
+    in_range: int
+    """Existing obstacles that meet the perception disc."""
 
 
 class Perception:
@@ -134,6 +73,9 @@ class Perception:
         # disc-polygon test (the scenario may hold hundreds of Otte polygons).
         self._lo = np.array([spec.polygon.min(axis=0) for spec in self._specs]).reshape(-1, 2)
         self._hi = np.array([spec.polygon.max(axis=0) for spec in self._specs]).reshape(-1, 2)
+        self._held: frozenset[str] = frozenset()
+        self._reported: list[str] | None = None
+        self._existing_shapes = LivePolygons()
 
     @property
     def radius(self) -> float:
@@ -186,3 +128,21 @@ class Perception:
                 self._known.discard(spec.id)
                 events.append((ObstacleEvent.REMOVED, spec.id))
         return events
+
+    def take_truth_change(self) -> tuple[ObstacleSpec, ...] | None:
+        """What exists now if that differs from what this last returned (first call: it)."""
+        existing = [spec.id for spec in self.truth.existing]
+        if existing == self._reported:
+            return None
+        self._reported = existing
+        return self.truth.existing
+
+    def observe(self, position: npt.ArrayLike, t: float) -> Observation:
+        """:meth:`step`, with what changed in the truth and what the disc meets."""
+        events = self.step(position, t)
+        held = sorted(self.truth.held - self._held)
+        self._held = self.truth.held
+        truth = self.take_truth_change()
+        in_range = len(self._existing_shapes.update(self.truth.existing).within(
+            np.asarray(position, dtype=float)[:2], self._radius))
+        return Observation(events, held, truth, in_range)

@@ -7,11 +7,64 @@ same machinery; its first two state components are taken as the planar position.
 
 from __future__ import annotations
 
+import enum
+from dataclasses import dataclass
+
 import numpy as np
 import numpy.typing as npt
 from scipy.linalg import expm
 
-__all__ = ['rover_matrices', 'Plant']
+from rrtq_common.settings import check, setting
+
+__all__ = ['SpringAnchor', 'PlantModel', 'PlantConfig', 'rover_matrices', 'Plant']
+
+
+class SpringAnchor(enum.StrEnum):
+    """Where the rover's spring is anchored (DESIGN.md, Plant)."""
+
+    LEG_TARGET = 'leg_target'
+    WORLD_ORIGIN = 'world_origin'
+
+
+class PlantModel(enum.StrEnum):
+    """Plant family."""
+
+    ROVER = 'rover'
+    LTI = 'lti'
+
+
+@dataclass(frozen=True, eq=False, kw_only=True)
+class PlantConfig:
+    """The simulated plant (the simulator's secret).
+
+    The rover's matrices follow from its mass, stiffness and damping
+    (:func:`rover_matrices`); an ``lti`` plant gives A and B (mass, stiffness and damping
+    are then nan).
+    """
+
+    A: np.ndarray = setting(rows='n', doc='state matrix A (n x n), 1/s and 1/s^2 entries')
+    B: np.ndarray = setting(rows='n', doc='input matrix B (n x m), 1/kg for the rover')
+    model: PlantModel = setting(PlantModel.ROVER, doc='plant family')
+    mass: float = setting(40.0, unit='kg', low=0.0, low_open=True, doc='rover mass m')
+    stiffness: float = setting(20.0, unit='N/m', low=0.0, doc='rover spring constant k')
+    damping: float = setting(45.0, unit='kg/s', low=0.0, doc='rover viscous damping c')
+    spring_anchor: SpringAnchor = setting(SpringAnchor.LEG_TARGET,
+                                          doc='where x_bar is measured from')
+    force_limit: float = setting(1000.0, unit='N', low=0.0, low_open=True,
+                                 doc='saturation per axis (inf: none)')
+
+    def __post_init__(self) -> None:
+        check(self)
+
+    @property
+    def n(self) -> int:
+        """State dimension."""
+        return int(self.A.shape[0])
+
+    @property
+    def m(self) -> int:
+        """Input dimension."""
+        return int(self.B.shape[1])
 
 
 def rover_matrices(mass: float, stiffness: float, damping: float) -> tuple[np.ndarray, np.ndarray]:

@@ -14,81 +14,69 @@ robot is held back until the robot is clear of it (``TrueObstacles``).
 
 from __future__ import annotations
 
-import numpy as np
+from collections.abc import Sequence
+from typing import Any
+
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rrtq_msgs.msg import ObstacleArray, PerceptionStatus
 
-from rrtq_sim import conversions as conv
-from rrtq_sim import qos, topics
-from rrtq_sim.params import declare, spin_node
-from rrtq_sim.perception import ObstacleEvent, Perception, TrueObstacles
-from rrtq_sim.polygon_set import LivePolygons
-from rrtq_sim.scenario import load_scenario
+from rrtq_common import conversions as conv
+from rrtq_common import qos, topics
+from rrtq_common.lockstep import StepGate
+from rrtq_common.params import declare_config, spin_node
+from rrtq_common.world import ObstacleSpec, TrueObstacles
+from rrtq_common.world_yaml import WorldSource, load_world
+from rrtq_sim.conversions import perception_status_msg
+from rrtq_sim.perception import Observation, Perception
 
 
 class SpawnerNode(Node):
     """Publishes the known obstacle set at start and on every perception event."""
 
-    def __init__(self, **kwargs) -> None:
+    def __init__(self, **kwargs: Any) -> None:
         super().__init__('obstacle_spawner', **kwargs)
-        scenario = load_scenario(declare(self, 'scenario', '', 'scenario YAML with the '
-                                         'obstacles (validated by the orchestrator)'))
-        self.specs = {spec.id: spec for spec in scenario.obstacles}
-        self.perception = Perception(scenario.obstacles, scenario.perception_radius,
-                                     TrueObstacles.for_scenario(scenario))
-        self.held: frozenset[str] = frozenset()
-        self.existing_shapes = LivePolygons()
+        world = load_world(declare_config(self, WorldSource).scenario)
+        self.perception = Perception(world.obstacles, world.perception_radius,
+                                     TrueObstacles.for_scenario(world))
         self.pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_DETECTED, qos.LATCHED)
         self.status_pub = self.create_publisher(PerceptionStatus, topics.PERCEPTION_STATUS,
                                                 qos.STREAM)
         self.truth_pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_TRUTH,
                                                qos.LATCHED)
-        self.last_stamp = -1
+        self.gate = StepGate([], lockstep=True, ordered=False, resend=self.status_pub.publish)
         self.detected_stamp = 0
-        self.existing: list[str] | None = None
         self.create_subscription(Odometry, topics.ODOM, self.on_odom, qos.STREAM)
-        self.publish(0)
-        self.publish_truth(0)
+        self.publish_map(0)
+        self.publish_truth(0, self.perception.take_truth_change())
 
     def on_odom(self, msg: Odometry) -> None:
-        stamp = conv.stamp_ns(msg.header.stamp)
-        if stamp <= self.last_stamp:
-            self.status_pub.publish(self.status)   # a resent step: answer it again
-            return
-        self.last_stamp = stamp
-        position = conv.odometry_state(msg)[:2]
-        t = stamp * 1e-9
-        events = self.perception.step(position, t)
-        for event, oid in events:
+        for step in self.gate.offer('odom', conv.stamp_ns(msg.header.stamp), msg):
+            seen = self.perception.observe(conv.odometry_state(msg)[:2], step.stamp_ns * 1e-9)
+            self._log(step.stamp_ns * 1e-9, seen)
+            if seen.events:
+                self.publish_map(step.stamp_ns)
+            self.publish_truth(step.stamp_ns, seen.truth)
+            status = perception_status_msg(msg.header, self.detected_stamp,
+                                           len(self.perception.known_ids), seen)
+            self.gate.answered(step.stamp_ns, status)
+            self.status_pub.publish(status)
+
+    def _log(self, t: float, seen: Observation) -> None:
+        for event, oid in seen.events:
             self.get_logger().info(f't={t:.2f} s: obstacle {oid} {event.value}')
-        for oid in sorted(self.perception.truth.held - self.held):
+        for oid in seen.held:
             self.get_logger().info(f't={t:.2f} s: obstacle {oid} held back: the robot is '
                                    'within its appear clearance')
-        self.held = self.perception.truth.held
-        if events:
-            self.publish(stamp)
-        self.publish_truth(stamp)
-        in_range = len(self.existing_shapes.update(self.perception.truth.existing).within(
-            position, self.perception.radius))
-        self.status = PerceptionStatus(
-            header=msg.header, detected_stamp=conv.time_msg(self.detected_stamp),
-            known=len(self.perception.known_ids), in_range=in_range,
-            detected=[oid for e, oid in events if e is ObstacleEvent.DETECTED],
-            removed=[oid for e, oid in events if e is ObstacleEvent.REMOVED])
-        self.status_pub.publish(self.status)
 
-    def publish_truth(self, stamp: int) -> None:
-        existing = [spec.id for spec in self.perception.truth.existing]
-        if existing != self.existing:
-            self.existing = existing
+    def publish_truth(self, stamp: int, existing: Sequence[ObstacleSpec] | None) -> None:
+        if existing is not None:
             self.truth_pub.publish(conv.obstacle_array_msg(
-                stamp, [(oid, self.specs[oid].polygon) for oid in existing]))
+                stamp, [(spec.id, spec.polygon) for spec in existing]))
 
-    def publish(self, stamp: int) -> None:
-        known = [(oid, self.specs[oid].polygon) for oid in self.specs
-                 if oid in self.perception.known_ids]
-        self.pub.publish(conv.obstacle_array_msg(stamp, known))
+    def publish_map(self, stamp: int) -> None:
+        self.pub.publish(conv.obstacle_array_msg(
+            stamp, [(spec.id, spec.polygon) for spec in self.perception.known_obstacles()]))
         self.detected_stamp = stamp
 
 

@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from rrtq_sim.perception import ObstacleEvent, Perception, TrueObstacles
-from rrtq_sim.scenario import ObstacleSpec
+from rrtq_common.world import ObstacleSpec, TrueObstacles
+from rrtq_sim.perception import ObstacleEvent, Perception
 
 DET, REM = ObstacleEvent.DETECTED, ObstacleEvent.REMOVED
 
@@ -126,15 +126,3 @@ def test_bad_inputs():
     with pytest.raises(ValueError):
         TrueObstacles(WORLD, clearance=math.nan)
     assert Perception([], radius=1.0).step([0.0, 0.0], 0.0) == []
-
-
-def test_scenario_appear_clearance_reaches_the_truth():
-    from rrtq_sim.scenario import ScenarioError, parse_scenario
-    base = {'bounds': {'x': [-5, 5], 'y': [-5, 5]}, 'start': [-4, 0], 'goal': [4, 0], 'robot_radius': 0.5,
-            'obstacles': [{'id': 'due', 'polygon': [[-3, -1], [-2, -1], [-2, 1], [-3, 1]], 'appear_at': 1.0}]}
-    assert parse_scenario(base, 's.yaml').appear_clearance == 1.0
-    truth = TrueObstacles.for_scenario(parse_scenario(base | {'appear_clearance': 0.2}, 's.yaml'))
-    assert truth.update([-3.6, 0.0], 1.0) == ()            # disc 0.1 m away: within 0.2
-    assert [s.id for s in truth.update([-4.0, 0.0], 1.1)] == ['due']   # 0.5 m: clear
-    with pytest.raises(ScenarioError, match='appear_clearance'):
-        parse_scenario(base | {'appear_clearance': -1.0}, 's.yaml')

@@ -1,0 +1,169 @@
+"""The sections of a scenario file, each read into the settings dataclass of its core.
+
+Defaults and ranges come from the dataclasses (:meth:`rrtq_common.yaml_reader.Reader.setting`);
+what is checked here is what a dataclass cannot know alone: which keys a section allows,
+shapes that depend on the plant, settings required by a variant or a model.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from rrtq_bringup.mission import MissionConfig
+from rrtq_common.world import World
+from rrtq_common.yaml_reader import Reader, field_default, frozen
+from rrtq_controller.config import ControllerConfig, Variant
+from rrtq_planner.safety import SafetyConfig
+from rrtq_planner.session import PlannerConfig
+from rrtq_sim.disturbance import DisturbanceConfig, DisturbanceModel
+from rrtq_sim.plant import PlantConfig, PlantModel, rover_matrices
+
+__all__ = ['read_plant', 'read_disturbance', 'read_controller', 'read_planner']
+
+_ROVER_KEYS = ('model', 'mass', 'stiffness', 'damping', 'spring_anchor', 'force_limit')
+_LTI_KEYS = ('model', 'A', 'B', 'spring_anchor', 'force_limit')
+_DIST_KEYS = ('model', 'F', 'amplitude', 'frequency', 'gamma')
+_CTRL_KEYS = (
+    'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
+    'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
+)  # fmt: skip
+# planner key -> the settings dataclass it belongs to
+_PLANNER_KEYS: dict[str, type] = {
+    'steer_distance': PlannerConfig, 'epsilon': PlannerConfig,
+    'iterations_per_step': PlannerConfig, 'max_nodes': PlannerConfig,
+    'cycle_budget_ms': PlannerConfig, 'tree_period_s': PlannerConfig,
+    'goal_tolerance': MissionConfig, 'growth_threshold': SafetyConfig,
+}
+
+
+def _choice(r: Reader, data: dict[str, Any], name: str, cls: type, section: str) -> Any:
+    enum_type = type(field_default(cls, name))
+    return r.choice(data.get(name, field_default(cls, name)), f'{section}.{name}', enum_type)
+
+
+def read_plant(r: Reader, raw: Any) -> PlantConfig:
+    """``plant:``: the rover (mass, stiffness, damping) or an LTI plant (A, B)."""
+    key = 'plant'
+    data = r.mapping({} if raw is None else raw, key, None)
+    model = _choice(r, data, 'model', PlantConfig, key)
+    data = r.mapping(data, key, _ROVER_KEYS if model is PlantModel.ROVER else _LTI_KEYS)
+    anchor = _choice(r, data, 'spring_anchor', PlantConfig, key)
+    limit = r.setting(data, 'force_limit', PlantConfig, key, allow_inf=True)
+    if model is PlantModel.ROVER:
+        mass, stiffness, damping = (r.setting(data, name, PlantConfig, key)
+                                    for name in ('mass', 'stiffness', 'damping'))
+        a, b = rover_matrices(mass, stiffness, damping)
+    else:
+        for name in ('A', 'B'):
+            if name not in data:
+                raise r.error(f'plant.{name}', 'required for model lti')
+        a = r.matrix(data['A'], 'plant.A', (None, None))
+        if a.shape[0] != a.shape[1] or a.shape[0] < 2:
+            raise r.error(
+                'plant.A', f'must be n x n with n >= 2 (states 0, 1: position), got {a.shape}'
+            )
+        b = r.matrix(data['B'], 'plant.B', (a.shape[0], None))
+        mass = stiffness = damping = np.nan
+    return PlantConfig(model=model, A=frozen(a), B=frozen(b), mass=mass, stiffness=stiffness,
+                       damping=damping, spring_anchor=anchor, force_limit=limit)
+
+
+def read_disturbance(r: Reader, raw: Any, n: int, needs_f: bool) -> DisturbanceConfig:
+    """``disturbance:``; F defaults to the rover's column when n = 4."""
+    key = 'disturbance'
+    data = r.mapping({} if raw is None else raw, key, _DIST_KEYS)
+    model = _choice(r, data, 'model', DisturbanceConfig, key)
+    if 'F' in data:
+        f = r.matrix(data['F'], 'disturbance.F', (n, None))
+    elif n == 4:
+        f = field_default(DisturbanceConfig, 'F')
+    elif model is DisturbanceModel.NONE and not needs_f:
+        f = np.zeros((n, 1))
+    else:
+        raise r.error('disturbance.F', f'required when the plant has n = {n} != 4 states')
+    signed = model in (DisturbanceModel.CONSTANT, DisturbanceModel.SINUSOID)
+    amplitude = r.number(data.get('amplitude', field_default(DisturbanceConfig, 'amplitude')),
+                         'disturbance.amplitude', nonnegative=not signed)
+    gamma = r.setting(data, 'gamma', DisturbanceConfig, key)
+    if model is DisturbanceModel.WORST_CASE and gamma is None:
+        raise r.error('disturbance.gamma', 'required for model worst_case')
+    return DisturbanceConfig(model=model, F=frozen(f), amplitude=amplitude,
+                             frequency=r.setting(data, 'frequency', DisturbanceConfig, key),
+                             gamma=gamma)
+
+
+def _forces(r: Reader, raw: Any, key: str) -> tuple[tuple[float, float, float], ...]:
+    if not isinstance(raw, list) or not raw:
+        raise r.error(key, 'expected a non-empty list of [t, fx, fy]')
+    out: list[tuple[float, float, float]] = []
+    for i, row in enumerate(raw):
+        k = f'{key}[{i}]'
+        if not isinstance(row, list) or len(row) != 3:
+            raise r.error(k, f'expected [t, fx, fy], got {row!r}')
+        t = r.number(row[0], f'{k}[0]', nonnegative=True)
+        if out and not t > out[-1][0]:
+            raise r.error(k, f'times must be strictly increasing ({t} after {out[-1][0]})')
+        out.append((t, r.number(row[1], f'{k}[1]'), r.number(row[2], f'{k}[2]')))
+    return tuple(out)
+
+
+def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> ControllerConfig:
+    """``controller:``; the open-loop variant's target is the scenario's goal."""
+    key = 'controller'
+    n, m = plant.n, plant.m
+    data = r.mapping({} if raw is None else raw, key, _CTRL_KEYS)
+    variant = _choice(r, data, 'variant', ControllerConfig, key)
+    horizon = r.setting(data, 'horizon', ControllerConfig, key)
+    dt = r.setting(data, 'dt', ControllerConfig, key)
+    if dt > horizon:
+        raise r.error('controller.dt', f'dt = {dt} s exceeds the horizon {horizon} s')
+    weights = {
+        name: frozen(r.weight(data.get(name, field_default(ControllerConfig, name)),
+                              f'controller.{name}', size, definite=definite))
+        for name, size, definite in (('M', n, False), ('R', m, True), ('P_T', n, False))
+    }
+    gamma = r.setting(data, 'gamma', ControllerConfig, key)
+    if variant is Variant.ROBUST and gamma is None:
+        raise r.error('controller.gamma', 'required for the robust variant')
+    forces: tuple[tuple[float, float, float], ...] = ()
+    if variant is Variant.OPEN_LOOP:
+        if 'forces' not in data:
+            raise r.error('controller.forces', 'required for the open_loop variant')
+        if m != 2:
+            raise r.error(
+                'controller.forces', f'[t, fx, fy] needs a plant with 2 inputs, this one has {m}'
+            )
+        forces = _forces(r, data['forces'], 'controller.forces')
+    elif 'forces' in data:
+        raise r.error('controller.forces', f'only for the open_loop variant, not {variant}')
+    gain = None
+    if data.get('initial_gain') is not None:
+        matrix = r.matrix(data['initial_gain'], 'controller.initial_gain', (m, n))
+        gain = tuple(tuple(float(v) for v in row) for row in matrix)
+    numbers = {name: r.setting(data, name, ControllerConfig, key)
+               for name in ('alpha_c', 'alpha_a', 'alpha_d', 'rho', 'probing_std',
+                            'probing_decay')}
+    return ControllerConfig(
+        variant=variant, horizon=horizon, dt=dt, gamma=gamma, forces=forces,
+        goal=(float(world.goal[0]), float(world.goal[1])),
+        critic_law=_choice(r, data, 'critic_law', ControllerConfig, key),
+        actor_law=_choice(r, data, 'actor_law', ControllerConfig, key),
+        initial_gain=gain, **weights, **numbers)
+
+
+def read_planner(r: Reader, raw: Any,
+                 world: World) -> tuple[PlannerConfig, SafetyConfig, float]:
+    """``planner:``: the planner node's settings, the safety node's growth threshold and
+    the referee's goal tolerance."""
+    key = 'planner'
+    data = r.mapping({} if raw is None else raw, key, tuple(_PLANNER_KEYS))
+    values = {name: r.setting(data, name, cls, key) for name, cls in _PLANNER_KEYS.items()}
+    (x0, x1), (y0, y1) = world.bounds
+    planner = PlannerConfig(bounds=(x0, x1, y0, y1), **{
+        name: values[name] for name, cls in _PLANNER_KEYS.items() if cls is PlannerConfig})
+    safety = SafetyConfig(robot_radius=world.robot_radius,
+                          growth_threshold=values['growth_threshold'])
+    return planner, safety, values['goal_tolerance']
+

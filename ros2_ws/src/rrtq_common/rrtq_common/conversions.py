@@ -1,0 +1,105 @@
+"""Messages <-> core types that every node shares: time, odometry, obstacles, paths.
+
+Each package keeps its own ``conversions`` module for its own messages; this one holds
+the types that cross packages.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from geometry_msgs.msg import Point32, Polygon, PoseStamped
+from nav_msgs.msg import Odometry, Path
+from rosgraph_msgs.msg import Clock
+from rrtq_msgs.msg import Obstacle, ObstacleArray
+
+MAP_FRAME = 'map'
+ROBOT_FRAME = 'base_link'
+
+
+def time_msg(ns: int) -> Time:
+    """A stamp from integer nanoseconds."""
+    return Time(sec=ns // 10**9, nanosec=ns % 10**9)
+
+
+def stamp_ns(stamp: Time) -> int:
+    """Integer nanoseconds of a stamp (lock-step compares them exactly)."""
+    return stamp.sec * 10**9 + stamp.nanosec
+
+
+def clock_msg(ns: int) -> Clock:
+    """/clock at ``ns``."""
+    return Clock(clock=time_msg(ns))
+
+
+def odometry_msg(ns: int, x: np.ndarray) -> Odometry:
+    """Odometry of the planar robot: position and velocity in ``map``.
+
+    The robot has no heading state (a point mass), so ``base_link`` is kept parallel
+    to ``map`` (identity orientation) and the twist, expressed in ``base_link`` per
+    nav_msgs' convention, equals the velocity in ``map``.
+    """
+    msg = Odometry()
+    msg.header.stamp = time_msg(ns)
+    msg.header.frame_id = MAP_FRAME
+    msg.child_frame_id = ROBOT_FRAME
+    msg.pose.pose.position.x = float(x[0])
+    msg.pose.pose.position.y = float(x[1])
+    msg.pose.pose.orientation.w = 1.0
+    msg.twist.twist.linear.x = float(x[2])
+    msg.twist.twist.linear.y = float(x[3])
+    return msg
+
+
+def odometry_state(msg: Odometry) -> np.ndarray:
+    """(p_x, p_y, v_x, v_y) from an odometry message."""
+    return np.array([msg.pose.pose.position.x, msg.pose.pose.position.y,
+                     msg.twist.twist.linear.x, msg.twist.twist.linear.y])
+
+
+def polygon_msg(vertices: np.ndarray) -> Polygon:
+    """A polygon (k, 2), m."""
+    return Polygon(points=[Point32(x=float(x), y=float(y), z=0.0) for x, y in vertices])
+
+
+def polygon_array(msg: Polygon) -> np.ndarray:
+    """(k, 2) vertices, m."""
+    return np.array([[p.x, p.y] for p in msg.points], dtype=float).reshape(-1, 2)
+
+
+def obstacle_array_msg(ns: int, obstacles: Iterable[tuple[str, np.ndarray]],
+                       margin: float = 0.0) -> ObstacleArray:
+    """(id, polygon) pairs in ``map``, each marked as grown by ``margin`` (m)."""
+    msg = ObstacleArray(margin=float(margin), obstacles=[
+        Obstacle(id=oid, polygon=polygon_msg(poly), margin=float(margin))
+        for oid, poly in obstacles])
+    msg.header.stamp = time_msg(ns)
+    msg.header.frame_id = MAP_FRAME
+    return msg
+
+
+def obstacle_array(msg: ObstacleArray) -> list[tuple[str, np.ndarray]]:
+    """(id, polygon) pairs."""
+    return [(o.id, polygon_array(o.polygon)) for o in msg.obstacles]
+
+
+def path_msg(ns: int, waypoints: Iterable[tuple[float, float]]) -> Path:
+    """A path in ``map`` through ``waypoints`` (m), poses with identity orientation."""
+    msg = Path()
+    msg.header.stamp = time_msg(ns)
+    msg.header.frame_id = MAP_FRAME
+    for x, y in waypoints:
+        pose = PoseStamped()
+        pose.header = msg.header
+        pose.pose.position.x, pose.pose.position.y = float(x), float(y)
+        pose.pose.orientation.w = 1.0
+        msg.poses.append(pose)
+    return msg
+
+
+def path_waypoints(msg: Path) -> np.ndarray:
+    """(K, 2) waypoints of a path, m."""
+    return np.array([[p.pose.position.x, p.pose.position.y] for p in msg.poses],
+                    dtype=float).reshape(-1, 2)

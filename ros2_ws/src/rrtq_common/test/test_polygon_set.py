@@ -1,0 +1,88 @@
+"""PolygonSet: signed distances, nearest and disc queries against shapely, brute force."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from rrtq_common.geometry import polygon_from_circle
+from rrtq_common.polygon_set import LivePolygons, PolygonSet
+
+ELL = np.array([[0.0, 0.0], [0.0, 3.0], [1.0, 3.0], [1.0, 1.0], [3.0, 1.0], [3.0, 0.0]])
+
+
+def shapely_signed(point, poly) -> float:
+    shape, p = shapely.Polygon(poly), shapely.Point(point)
+    return -shape.exterior.distance(p) if shape.contains(p) else shape.distance(p)
+
+
+def random_scene(rng, count=60):
+    polys = [polygon_from_circle(rng.uniform(-20, 20, 2), rng.uniform(0.3, 2.0),
+                                 int(rng.integers(3, 33))) for _ in range(count)]
+    return polys + [ELL + rng.uniform(-20, 20, 2) for _ in range(5)]
+
+
+def test_signed_distance_matches_shapely_inside_outside_and_concave():
+    rng = np.random.default_rng(1)
+    polys = random_scene(rng)
+    pset = PolygonSet(polys)
+    for point in rng.uniform(-22, 22, (200, 2)):
+        got = pset.signed_distances(point, np.arange(len(polys)))
+        want = [shapely_signed(point, p) for p in polys]
+        np.testing.assert_allclose(got, want, atol=1e-9)
+    # Order of the answer follows the order asked; the L's notch is outside.
+    got = PolygonSet([ELL, ELL + 10]).signed_distances([2.0, 2.0], [1, 0])
+    np.testing.assert_allclose(got, [shapely_signed([2, 2], ELL + 10), 1.0])
+    assert PolygonSet([ELL]).signed_distances([0.5, 0.5], [0])[0] == pytest.approx(-0.5)
+    assert PolygonSet([ELL]).signed_distances([1.0, 2.0], [0])[0] == 0.0  # on the boundary
+
+
+def test_nearest_is_the_brute_force_minimum():
+    rng = np.random.default_rng(2)
+    polys = random_scene(rng)
+    pset = PolygonSet(polys)
+    for point in rng.uniform(-22, 22, (300, 2)):
+        want = [shapely_signed(point, p) for p in polys]
+        value, index = pset.nearest(point)
+        assert value == pytest.approx(min(want), abs=1e-9)
+        assert want[index] == pytest.approx(value, abs=1e-9)
+    # Inside two overlapping polygons the deeper one is the nearest (most negative).
+    small, big = polygon_from_circle([0, 0], 1.0), polygon_from_circle([0.5, 0], 3.0)
+    value, index = PolygonSet([small, big]).nearest([0.2, 0.0])
+    assert index == 1 and value < -2.0
+
+
+def test_nearest_and_within_on_an_empty_set():
+    assert PolygonSet([]).nearest([0, 0]) == (math.inf, -1)
+    assert PolygonSet([]).within([0, 0], 5.0).size == 0
+
+
+def test_within_is_the_set_of_polygons_meeting_the_closed_disc():
+    rng = np.random.default_rng(3)
+    polys = random_scene(rng)
+    pset = PolygonSet(polys)
+    for point in rng.uniform(-22, 22, (100, 2)):
+        want = [i for i, p in enumerate(polys)
+                if shapely.Polygon(p).distance(shapely.Point(point)) <= 4.0]
+        assert pset.within(point, 4.0).tolist() == want
+    with pytest.raises(ValueError):
+        PolygonSet([ELL[:2]])
+
+
+class Item:
+    def __init__(self, polygon):
+        self.polygon = polygon
+
+
+def test_live_polygons_rebuild_only_when_the_items_change():
+    a, b = Item(ELL), Item(ELL + 10)
+    live = LivePolygons()
+    first = live.update((a, b))
+    assert live.update([a, b]) is first                     # same items, new sequence
+    assert live.update((b,)) is not first
+    assert live.update((b,)).nearest([10.5, 10.5]) == (pytest.approx(-0.5), 0)
+    assert live.update((Item(ELL + 10),)) is not live.update((b,))   # identity, not value
+    assert len(live.update(())) == 0

@@ -1,0 +1,118 @@
+"""The simulated robot: the plant's state, stepped with the held force and disturbance.
+
+What the simulator node runs (no rclpy): the inputs it holds over a step, the spring
+anchor, and the rule that nothing non-finite or misshapen ever reaches the plant.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from rrtq_common.lockstep import seconds_to_ns
+from rrtq_common.settings import check, setting
+from rrtq_sim.plant import Plant, SpringAnchor
+
+__all__ = ['SimulatorConfig', 'Simulation']
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimulatorConfig:
+    """The simulator node's settings (the plant's are :class:`rrtq_sim.plant.PlantConfig`)."""
+
+    start: tuple[float, float] = setting((0.0, 0.0), unit='m',
+                                         doc='initial position; the robot starts at rest')
+    speed: float = setting(0.0, low=0.0, doc='0: lock-step as fast as possible; > 0: '
+                           'wall-clock pace factor')
+    duration: float = setting(0.0, unit='s', low=0.0,
+                              doc='stop stepping at this sim time (0: never)')
+    acks: tuple[str, ...] = setting(('cmd_force',), doc='stamped outputs awaited before each '
+                                    'lock-step step: cmd_force controller_state disturbance '
+                                    'perception_status')
+    wait_for: tuple[str, ...] = setting((), doc='topic:count pairs; the first step waits '
+                                        'until each topic has that many subscribers')
+    settle_s: float = setting(0.5, unit='s', low=0.0, doc='wall time to wait once the graph '
+                              'is connected, so that discovery between the other nodes '
+                              'completes too')
+    resend_period_s: float = setting(2.0, unit='s', low=0.01, doc='lock-step: republish the '
+                                     'current odometry if acknowledgements stall this long '
+                                     '(wall)')
+
+    def __post_init__(self) -> None:
+        check(self)
+
+
+class Simulation:
+    """The full state x (world frame) of ``plant``, one exact zero-order-hold step at a time.
+
+    Parameters
+    ----------
+    plant : Plant
+    start : array_like, shape (2,)
+        Initial position, m (at rest).
+    anchor : SpringAnchor
+        ``leg_target``: the spring follows the controller's target; else the origin.
+    duration : float
+        Sim time after which no step is taken, s (0: never).
+    """
+
+    def __init__(self, plant: Plant, start: npt.ArrayLike, anchor: SpringAnchor,
+                 duration: float) -> None:
+        self.plant = plant
+        self.anchor_mode = anchor
+        self.dt_ns = seconds_to_ns(plant.dt)
+        self.duration_ns = seconds_to_ns(duration)
+        self.step_index = 0
+        self.x = np.zeros(plant.n)
+        self.x[:2] = np.asarray(start, dtype=float)[:2]
+        self.anchor = np.array(self.x[:2])
+        self.u = np.zeros(plant.m)
+        self.d = np.zeros(plant.q)
+        self.rejected = 0
+        self.paused = False
+
+    @property
+    def now_ns(self) -> int:
+        """Sim time of the current state, ns."""
+        return self.step_index * self.dt_ns
+
+    @property
+    def finished(self) -> bool:
+        """The duration has run out."""
+        return bool(self.duration_ns) and self.now_ns >= self.duration_ns
+
+    def hold_force(self, u: npt.ArrayLike) -> bool:
+        """Hold ``u`` (N) over the next steps; False when it was not finite (zero is held)."""
+        force = np.asarray(u, dtype=float)
+        if np.all(np.isfinite(force)):
+            self.u = force
+            return True
+        self.rejected += 1
+        self.u = np.zeros(self.plant.m)
+        return False
+
+    def hold_disturbance(self, d: npt.ArrayLike) -> bool:
+        """Hold ``d``; False when it was not finite or not of size q (zero is held)."""
+        value = np.asarray(d, dtype=float)
+        if value.shape == self.d.shape and np.all(np.isfinite(value)):
+            self.d = value
+            return True
+        self.rejected += 1
+        self.d = np.zeros(self.plant.q)
+        return False
+
+    def follow_target(self, target: npt.ArrayLike) -> None:
+        """The controller's leg target (m): the spring's anchor when it is ``leg_target``."""
+        if self.anchor_mode is SpringAnchor.LEG_TARGET:
+            self.anchor = np.asarray(target, dtype=float)
+
+    def advance(self) -> bool:
+        """One step with the held force and disturbance; False when paused or finished."""
+        if self.paused or self.finished:
+            return False
+        anchor = self.anchor if self.anchor_mode is SpringAnchor.LEG_TARGET else np.zeros(2)
+        self.x = self.plant.step(self.x, self.u, self.d, anchor)
+        self.step_index += 1
+        return True
