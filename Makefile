@@ -2,12 +2,17 @@
 SHELL := /bin/bash
 ENV := source scripts/env.sh &&
 
-.PHONY: setup test demo bench clean
+.PHONY: setup check test demo bench clean
 
 setup:
 	@bash scripts/setup.sh
 
-test: setup
+# The lint (ruff: pycodestyle, pyflakes, pep257 docstrings) and the type check of the cores
+# (mypy, strict): the first part of `make test`, which stops at the first error.
+check: setup
+	@$(ENV) ruff check . && mypy
+
+test: check
 	@$(ENV) python -m pytest
 
 demo: setup
@@ -18,4 +23,4 @@ bench: setup
 	@$(ENV) python benchmarks/run_all.py
 
 clean:
-	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log .stamps
+	rm -rf ros2_ws/build ros2_ws/install ros2_ws/log .stamps .mypy_cache .ruff_cache

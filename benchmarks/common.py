@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import pathlib
+import time
+from typing import Any
 
 from rrtq_bringup.bench_table import machine
 
@@ -21,3 +23,18 @@ def save(name: str, results: dict, table: str) -> None:
               f"{info['python']}, commit {info['commit']}_\n\n")
     (RESULTS / f'{name}.md').write_text(header + table + '\n')
     print(header + table)
+
+
+def time_steps(ctrl: Any) -> list[float]:
+    """Wrap ``ctrl.step`` so that each call's wall time (s) lands in the returned list."""
+    times: list[float] = []
+    step = ctrl.step
+
+    def timed(t, x, d_applied=None):
+        t0 = time.perf_counter()
+        u = step(t, x, d_applied)
+        times.append(time.perf_counter() - t0)
+        return u
+
+    ctrl.step = timed
+    return times

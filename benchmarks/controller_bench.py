@@ -33,7 +33,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from common import save  # noqa: E402
+from common import save, time_steps  # noqa: E402
 from rrtq_testing import controller_reference  # noqa: E402
 
 from rrtq_controller.config import ActorLaw, ControllerConfig, CriticLaw  # noqa: E402
@@ -55,16 +55,7 @@ def run(name: str, seed: int, legs: int, ref) -> dict:
                            initial_gain=k0, probing_std=20.0)
     A, B = ref.rover(stiffness=0.0)
     ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(seed))
-    times: list[float] = []
-    step = ctrl.step
-
-    def timed(t, x, d_applied=None):
-        t0 = time.perf_counter()
-        u = step(t, x, d_applied)
-        times.append(time.perf_counter() - t0)
-        return u
-
-    ctrl.step = timed  # type: ignore[method-assign]
+    times = time_steps(ctrl)
     # The critic's own greedy gain R⁻¹Q̂_ux(τ) (what the actor is drawn to, once the critic
     # is trusted) at the end of every leg, over τ in [T/2, T] where the legs run.
     Pf = ref.riccati(A, B, M * np.eye(4), R * np.eye(2), P_T * np.eye(4), cfg.horizon)

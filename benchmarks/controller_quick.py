@@ -18,12 +18,13 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
+from pathlib import Path
 
 import numpy as np
 
 from rrtq_controller.config import ActorLaw, ControllerConfig, CriticLaw
 from rrtq_controller.q_learning import QLearningController
+from common import time_steps
 from rrtq_testing import controller_reference
 
 
@@ -46,15 +47,7 @@ def run(plant: str, law: CriticLaw, legs: int, seed: int, ref, actor: ActorLaw =
     A, B = ref.rover(stiffness=k)
     cfg = config_for(plant, law, actor)
     ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(seed))
-    times: list[float] = []
-    step = ctrl.step
-
-    def timed(t, x, d_applied=None):
-        t0 = time.perf_counter()
-        u = step(t, x, d_applied)
-        times.append(time.perf_counter() - t0)
-        return u
-    ctrl.step = timed  # type: ignore[method-assign]
+    times = time_steps(ctrl)
     diverged = None
     try:
         records = ref.run_legs(ctrl, A, B, M * np.eye(4), R * np.eye(2), 0.5 * np.eye(4), cfg.horizon, cfg.dt,

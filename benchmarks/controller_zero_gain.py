@@ -63,7 +63,8 @@ def main() -> int:
         rows.append(run(seed, ref))
         print(rows[-1], file=sys.stderr, flush=True)
     lines = ['Rover without a spring, no initial gain, 20 legs of 3-8 m per seed.', '',
-             '| seed | basis widened at leg | gain error leg 10 / 20 | cost/optimum legs 11-20 median / max | legs 11-20 in window |',
+             '| seed | basis widened at leg | gain error leg 10 / 20 | '
+             'cost/optimum legs 11-20 median / max | legs 11-20 in window |',
              '|---|---|---|---|---|']
     for r in rows:
         lines.append(f"| {r['seed']} | {r['widened_at_leg']} | {r['gain_error_leg10']:.3f} / "

@@ -18,7 +18,7 @@ import time
 import numpy as np
 from rclpy.serialization import serialize_message
 
-from common import ROOT, save
+from common import save
 from rrtq_bringup.orchestrator import domain_id, ros_env
 from rrtq_bringup.recording import McapRecorder, QosOffer
 from rrtq_common.conversions import odometry_msg
@@ -76,7 +76,7 @@ def node(tmp: str, rate: float, count: int) -> dict:
         recorder.send_signal(2)
         recorder.wait(timeout=30)
     times, size = [], 0
-    for _, channel, message in make_reader(open(out, 'rb')).iter_messages(topics=['/odom']):
+    for _, _channel, message in make_reader(open(out, 'rb')).iter_messages(topics=['/odom']):
         times.append(message.log_time)
         size += len(message.data)
     span = (times[-1] - times[0]) * 1e-9

@@ -1,14 +1,12 @@
 """The simulator-side nodes on an in-process executor, driven by the test."""
 
 import numpy as np
-import pytest
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rrtq_msgs.msg import ControllerState, Disturbance, ObstacleArray
 from scipy.integrate import solve_ivp
-from scipy.linalg import expm
 
 from rrtq_bringup.recorder_node import RecorderNode
 from rrtq_bringup.testing import Collector, spin_until, wait_for_messages

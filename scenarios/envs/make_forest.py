@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Write a random discoverable forest scenario (YAML): the command of :mod:`rrtq_bringup.forest`.
 
-    source scripts/env.sh && python scenarios/envs/make_forest.py --seed 3 --out scenarios/forest_100.yaml
+source scripts/env.sh && python scenarios/envs/make_forest.py --seed 3 --out scenarios/forest_100.yaml
 """
 
 import sys

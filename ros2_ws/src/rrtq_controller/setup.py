@@ -15,7 +15,8 @@ setup(
     zip_safe=True,
     maintainer='rrtq maintainers',
     maintainer_email='maintainers@rrtq.dev',
-    description='Model-free finite-horizon Q-learning controller (actor/critic, robust zero-sum variant) and the open-loop force player.',
+    description='Model-free finite-horizon Q-learning controller (actor/critic, robust '
+                'zero-sum variant) and the open-loop force player.',
     license='MIT',
     tests_require=['pytest'],
     entry_points={

@@ -19,7 +19,8 @@ def _speed(text: str) -> float:
     try:
         value = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected 'max' or a positive factor, got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected 'max' or a positive factor, got {text!r}") from None
     if not value > 0.0:
         raise argparse.ArgumentTypeError(f'speed factor must be > 0, got {text}')
     return value
@@ -52,7 +53,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def cmd_run(args: argparse.Namespace) -> int:
-    from rrtq_bringup.orchestrator import BadInput, Run, RunOptions, check_supported
+    from rrtq_bringup.orchestrator import BadInput, Run, RunMode, RunOptions, check_supported
     from rrtq_bringup.scenario import ScenarioError, load_scenario
 
     try:
@@ -67,7 +68,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     for stale in ('run.mcap', 'summary.json'):
         (out / stale).unlink(missing_ok=True)
-    options = RunOptions(out_dir=out, speed=args.speed, mode=args.mode)
+    options = RunOptions(out_dir=out, speed=args.speed, mode=RunMode(args.mode))
     print(f'rrtq: running {scenario.name} (seed {scenario.seed}, {args.mode}, speed '
           f"{'max' if args.speed == 0 else args.speed}) -> {out}", file=sys.stderr)
     code = Run(scenario, options).execute()

@@ -12,11 +12,12 @@ import json
 import pathlib
 import sys
 
-from rrtq_bringup.leg_table import QUADRATURES, LegTable, format_table, leg_table, summary
+from rrtq_bringup.leg_table import (QUADRATURES, LegTable, Quadrature, format_table, leg_table,
+                                    summary)
 from rrtq_bringup.run_data import embedded_scenario, read_run, recorded_scenario
 
 
-def evaluate(path: str | pathlib.Path, quadrature: str = 'zoh') -> LegTable:
+def evaluate(path: str | pathlib.Path, quadrature: str = Quadrature.ZOH) -> LegTable:
     """Read a recording and its embedded scenario, and evaluate every leg."""
     if not embedded_scenario(path):
         raise ValueError(f'{path}: no embedded scenario (metadata record rrtq_scenario)')
@@ -29,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     """``python -m rrtq_bringup.leg_costs RUN.mcap [--json]``: print the leg table."""
     ap = argparse.ArgumentParser(description='Per-leg cost / Riccati optimum of a recording')
     ap.add_argument('mcap')
-    ap.add_argument('--quadrature', choices=QUADRATURES, default='zoh')
+    ap.add_argument('--quadrature', choices=QUADRATURES, default=Quadrature.ZOH.value)
     ap.add_argument('--json', action='store_true', help='print the summary as JSON')
     args = ap.parse_args(argv)
     table = evaluate(args.mcap, args.quadrature)

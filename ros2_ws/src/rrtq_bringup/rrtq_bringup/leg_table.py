@@ -51,6 +51,7 @@ steps of ‖K̂(τ_k) − R⁻¹BᵀP(τ_k)‖_F / ‖R⁻¹BᵀP(τ_k)‖_F.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 from typing import Any
 
@@ -62,11 +63,35 @@ from rrtq_bringup.scenario import Scenario
 from rrtq_controller.basis import TimeBasis
 from rrtq_sim.plant import SpringAnchor
 
-__all__ = ['QUADRATURES', 'LegRow', 'LegTable', 'leg_table', 'summary', 'format_table']
+__all__ = ['Quadrature', 'QUADRATURES', 'LegEnd', 'LegRow', 'LegTable', 'leg_table', 'summary',
+           'format_table']
 
 Array = NDArray[np.float64]
 
-QUADRATURES = ('zoh', 'trapezoid')
+
+class Quadrature(enum.StrEnum):
+    """How the running cost of a step is integrated (see the module doc)."""
+
+    ZOH = 'zoh'
+    """Exactly, with the inputs held over the step (Van Loan)."""
+    TRAPEZOID = 'trapezoid'
+    """From the samples alone: the trapezoidal rule on x̄ᵀMx̄, uᵀRu held."""
+
+
+QUADRATURES = tuple(q.value for q in Quadrature)
+
+
+class LegEnd(enum.StrEnum):
+    """How a recorded leg ended."""
+
+    WINDOW = 'window'
+    """D <= ρ D0: the terminal-state window was reached."""
+    HORIZON = 'horizon'
+    """T elapsed."""
+    SWITCH = 'switch'
+    """A new plan started another leg."""
+    END = 'end'
+    """The recording ended."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -98,8 +123,7 @@ class LegRow:
     """½ x̄0ᵀ P(T) x̄0."""
     gain_error: float
     """Mean relative Frobenius error of K̂(τ) over the leg's steps (nan: no actor weights)."""
-    ended_by: str
-    """'window' (D <= ρ D0), 'horizon' (T elapsed), 'switch' (new plan) or 'end' (recording)."""
+    ended_by: LegEnd
     model_residual: float
     """max_k ‖x̄_k+1 − (plant prediction)‖ / max(‖x̄_k‖, 1e-3 m) over the leg."""
 
@@ -121,7 +145,7 @@ class LegTable:
     rows: tuple[LegRow, ...]
     horizon: float
     """T, s."""
-    quadrature: str
+    quadrature: Quadrature
     anchor_note: str
     """How the spring anchor entered the leg problem."""
 
@@ -205,7 +229,7 @@ def _anchor_note(sc: Scenario) -> tuple[bool, str]:
 
 
 def _running_cost(mdl: LegModel, xb: Array, nxt: Array, u: Array, d: Array, times: Array,
-                  quadrature: str) -> tuple[float, float]:
+                  quadrature: Quadrature) -> tuple[float, float]:
     """½∫(x̄ᵀMx̄ + uᵀRu) over the steps, and the largest relative one-step model residual."""
     running, resid = 0.0, 0.0
     for k in range(xb.shape[0]):
@@ -214,7 +238,7 @@ def _running_cost(mdl: LegModel, xb: Array, nxt: Array, u: Array, d: Array, time
         E, Qd = mdl.step_matrices(dt)
         resid = max(resid, float(np.linalg.norm(nxt[k] - (E @ z)[:mdl.n]))
                     / max(float(np.linalg.norm(xb[k])), 1e-3))
-        if quadrature == 'zoh':
+        if quadrature is Quadrature.ZOH:
             running += float(z @ Qd @ z)
         else:
             a, b = xb[k], nxt[k]
@@ -234,7 +258,7 @@ def _gain_error(mdl: LegModel, actor_w: list[Array], taus: Array, basis: TimeBas
     return float(np.mean(errs)) if errs else math.nan
 
 
-def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh') -> LegTable:
+def leg_table(data: Any, scenario: Scenario, quadrature: str = Quadrature.ZOH) -> LegTable:
     """Evaluate every leg of a run (see the module doc for the definitions).
 
     Parameters
@@ -255,6 +279,7 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh') -> LegTabl
     """
     if quadrature not in QUADRATURES:
         raise ValueError(f'quadrature must be one of {QUADRATURES}, got {quadrature!r}')
+    rule = Quadrature(quadrature)
     sc = scenario
     A = np.asarray(sc.plant.A)
     n = A.shape[0]
@@ -286,28 +311,28 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh') -> LegTabl
         xr[:2] = st.target[s]
         mdl = model_for(xr)
         xb = st.x[s:e] - xr
-        ended: str | None = None
+        ended: LegEnd | None = None
         if e < st.t.size:
             t_end, x_end = float(st.t[e]), st.x[e] - xr
         elif st.tail is not None:
-            t_end, x_end, ended = st.tail[0], st.tail[1] - xr, 'end'
+            t_end, x_end, ended = st.tail[0], st.tail[1] - xr, LegEnd.END
         else:
-            t_end, x_end, ended = float(st.t[e - 1]), xb[-1], 'end'
+            t_end, x_end, ended = float(st.t[e - 1]), xb[-1], LegEnd.END
             xb, e = xb[:-1], e - 1
         nxt = np.vstack([xb[1:], x_end[None]])
         running, resid = _running_cost(mdl, xb, nxt, st.u[s:e], st.d[s:e],
-                                       np.append(st.t[s:e], t_end), quadrature)
+                                       np.append(st.t[s:e], t_end), rule)
         duration = t_end - float(st.t[s])
         tau_end = max(T - duration, 0.0)
         x0 = xb[0] if xb.shape[0] else x_end
         d0 = float(np.linalg.norm(x0))
         if ended is None:
             if np.linalg.norm(x_end) <= rho * d0 * (1 + 1e-9) + 1e-12:
-                ended = 'window'
+                ended = LegEnd.WINDOW
             elif duration >= T - 1e-6:
-                ended = 'horizon'
+                ended = LegEnd.HORIZON
             else:
-                ended = 'switch'
+                ended = LegEnd.SWITCH
         taus = np.maximum(T - (st.t[s:e] - st.t[s]), 0.0)
         rows.append(LegRow(
             index=int(st.leg[s]), start_time=float(st.t[s]), duration=duration,
@@ -317,7 +342,7 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = 'zoh') -> LegTabl
             optimum=mdl.value(x0, T),
             gain_error=_gain_error(mdl, st.actor_w[s:e], taus, basis),
             ended_by=ended, model_residual=resid))
-    return LegTable(tuple(rows), T, quadrature, note)
+    return LegTable(tuple(rows), T, rule, note)
 
 
 def summary(table: LegTable, last: int = 10) -> dict[str, Any]:
@@ -329,7 +354,7 @@ def summary(table: LegTable, last: int = 10) -> dict[str, Any]:
     leaves out legs ended by the recording.
     """
     rows = [r for r in table.rows if r.optimum > 0]
-    complete = [r for r in rows if r.ended_by != 'end']
+    complete = [r for r in rows if r.ended_by is not LegEnd.END]
 
     def med(rs: list[LegRow], attr: str) -> float | None:
         vals = [getattr(r, attr) for r in rs[-last:]]
@@ -359,17 +384,6 @@ def summary(table: LegTable, last: int = 10) -> dict[str, Any]:
         'ended_by': [r.ended_by for r in table.rows],
         'max_model_residual': max((r.model_residual for r in table.rows), default=0.0),
     }
-
-
-def format_table(table: LegTable) -> str:
-    """A Markdown table of the legs."""
-    lines = ['| leg | start s | dur s | D0 m | ended | running | to go | optimum | ratio '
-             '| gain err |', '|---|---|---|---|---|---|---|---|---|---|']
-    for r in table.rows:
-        lines.append(f'| {r.index} | {r.start_time:.2f} | {r.duration:.2f} | {r.d0:.2f} | '
-                     f'{r.ended_by} | {r.running_cost:.1f} | {r.cost_to_go:.2f} | '
-                     f'{r.optimum:.1f} | {r.ratio:.4f} | {r.gain_error:.3f} |')
-    return '\n'.join(lines)
 
 
 def format_table(table: LegTable) -> str:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import dataclasses
+import enum
 import fcntl
 import importlib
 import json
@@ -36,13 +37,22 @@ EXIT_SUCCESS, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 DOMAIN_LOCK_DIR = pathlib.Path('/tmp/rrtq-domains')
 
 
+class RunMode(enum.StrEnum):
+    """How the nodes of a run are hosted (both give the same results)."""
+
+    PROCESSES = 'processes'
+    """One OS process per node, as deployed."""
+    COMPOSED = 'composed'
+    """Every node on one executor in this process (fast Monte Carlo)."""
+
+
 @dataclasses.dataclass(frozen=True)
 class RunOptions:
     """How to run a scenario."""
 
     out_dir: pathlib.Path
     speed: float = 0.0                 # 0: lock-step as fast as possible; > 0: pace factor
-    mode: str = 'processes'            # processes | composed
+    mode: RunMode = RunMode.PROCESSES
     start_timeout_s: float = 60.0      # wall time allowed before the first step
     stall_timeout_s: float = 20.0      # wall time without a new step before giving up
 
@@ -119,7 +129,7 @@ class Run:
         try:
             with domain_id() as domain:
                 self.domain = domain
-                if self.options.mode == 'processes':
+                if self.options.mode is RunMode.PROCESSES:
                     self._run_processes(domain)
                 else:
                     self._run_composed(domain)

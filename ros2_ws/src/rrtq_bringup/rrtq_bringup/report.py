@@ -84,7 +84,7 @@ def summarise(data: RunData, scenario: dict, goal_tolerance: float = 0.5) -> dic
 def plot_map(data: RunData, scenario: dict, path: pathlib.Path) -> None:
     fig, ax = plt.subplots(figsize=(8, 8))
     bounds = scenario.get('bounds')
-    for oid, (poly, first, last) in _existence(data).items():
+    for poly, _first, last in _existence(data).values():
         vanished = data.odom_t.size and last < data.odom_t[-1] - 1e-9
         ax.add_patch(PolygonPatch(poly, closed=True, facecolor='none' if vanished else '0.35',
                                   edgecolor='0.2', hatch='//' if vanished else None, lw=1.0,

@@ -3,12 +3,13 @@
 Times are integer nanoseconds everywhere in lock-step mode, so that a stamp from one
 node compares equal to the same step's stamp from another (no float round-off).
 
-A node hands every message it receives to its :class:`StepGate` and processes the
-steps the gate returns. The gate is the one place that knows the modes: lock-step (a
-step is ready once its driver message and its :class:`Requirement` s are in, steps in
-order), paced (every driver message is a step, with the latest of every other input),
-and a resent step (the simulator republishes its odometry when acknowledgements stall:
-the node's last answer goes out again, unchanged).
+A node hands every message it receives to its :class:`StepGate`
+(:func:`rrtq_common.inputs.subscribe_inputs`) and processes the steps the gate hands it.
+The gate is the one place that knows the modes: lock-step (a step is ready once its
+driver message and its :class:`Requirement` s are in, steps in order), paced (every
+driver message is a step, with the latest of every other input), and a resent step (the
+simulator republishes its odometry when acknowledgements stall: the node's last answer
+goes out again, unchanged).
 """
 
 from __future__ import annotations
@@ -125,8 +126,10 @@ class StepInputs:
         self.last_delivered: int | None = None
 
     def add(self, key: str, stamp_ns: int, msg: Any) -> None:
-        """File a message (a per-step key, the driver, or a follow-up key); others are
-        ignored."""
+        """File a message (a per-step key, the driver, or a follow-up key).
+
+        Messages of other keys are ignored: they are not inputs of this node.
+        """
         if key in self._followups:
             self._followups[key][stamp_ns] = msg
         elif key not in self._steps:
@@ -136,7 +139,7 @@ class StepInputs:
 
     def pop_ready(self) -> list[dict[str, Any]]:
         """Every step that can now be processed, oldest first (key -> message)."""
-        ready = []
+        ready: list[dict[str, Any]] = []
         while True:
             # Steps are consecutive from 0: lock-step never skips one.
             stamp = 0 if self.last_delivered is None else self.last_delivered + self.dt_ns
@@ -172,8 +175,10 @@ class StepInputs:
         return values
 
     def _forget(self, stamp: int, named: dict[str, int]) -> None:
-        """Drop per-step messages before ``stamp`` and follow-ups older than the ones
-        just named (a status only ever names its latest publication)."""
+        """Drop per-step messages before ``stamp``, and follow-ups older than those named.
+
+        A status only ever names its latest publication.
+        """
         for table in self._steps.values():
             for s in [s for s in table if s < stamp]:
                 del table[s]
@@ -204,12 +209,21 @@ class StepGate:
     resend : callable, optional
         Publishes an answer again: called with the messages given to :meth:`answered`
         when a driver message repeats a step already answered.
+    on_step : callable, optional
+        Processes a step: called with each step as it becomes ready (else the node takes
+        them with :meth:`ready`).
+    held : bool
+        Keep the steps until :meth:`release` (a node that cannot process them yet; paced,
+        only the latest step is kept).
     """
 
     def __init__(self, requirements: Sequence[Requirement], *, lockstep: bool,
                  driver: str | None = 'odom', ordered: bool = True, dt_ns: int = 0,
-                 resend: Callable[..., None] | None = None) -> None:
+                 resend: Callable[..., None] | None = None,
+                 on_step: Callable[[Step], None] | None = None, held: bool = False) -> None:
         self.lockstep = lockstep
+        self.on_step = on_step
+        self.held = held
         self.driver = driver
         self.latest: dict[str, Any] = {}
         self._inputs: StepInputs | None = None
@@ -225,17 +239,34 @@ class StepGate:
         self._answer: tuple[int, tuple[Any, ...]] | None = None
 
     def add(self, key: str, stamp_ns: int, msg: Any) -> None:
-        """File a message (a driver message of a step already answered: answer it again)."""
+        """File a message, then hand every step that is ready to ``on_step``.
+
+        A driver message of a step already answered is answered again (``resend``).
+        """
+        self._file(key, stamp_ns, msg)
+        self._deliver()
+
+    def release(self) -> None:
+        """Stop holding the steps: hand the ready ones to ``on_step``, and all to come."""
+        self.held = False
+        self._deliver()
+
+    def _deliver(self) -> None:
+        if self.on_step is not None and not self.held:
+            for step in self.ready():
+                self.on_step(step)
+
+    def _file(self, key: str, stamp_ns: int, msg: Any) -> None:
         if key == self.driver and self._answer is not None and stamp_ns <= self._answer[0]:
             if self._resend is not None:
                 self._resend(*self._answer[1])
             return
         if not self.lockstep:
             self.latest[key] = msg
-            if self.driver is None:
-                self._ready.append(Step(stamp_ns, {key: msg}))
-            elif key == self.driver:
-                self._ready.append(Step(stamp_ns, dict(self.latest)))
+            if self.driver is None or key == self.driver:
+                step = Step(stamp_ns, {key: msg} if self.driver is None else dict(self.latest))
+                # Paced, a held step is superseded by the next: only the latest counts.
+                self._ready = [step] if self.held else [*self._ready, step]
         elif self._join is not None:
             if key in self._join.keys:
                 done = self._join.add(key, stamp_ns, msg)
@@ -253,11 +284,6 @@ class StepGate:
                 self._ready.append(Step(stamp, values))
         ready, self._ready = self._ready, []
         return ready
-
-    def offer(self, key: str, stamp_ns: int, msg: Any) -> list[Step]:
-        """:meth:`add`, then :meth:`ready`."""
-        self.add(key, stamp_ns, msg)
-        return self.ready()
 
     def answered(self, stamp_ns: int, *messages: Any) -> None:
         """Record the answer to step ``stamp_ns`` (what a resent step gets again)."""

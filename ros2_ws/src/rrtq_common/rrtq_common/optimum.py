@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import typing
 from collections.abc import Sequence
 
 import networkx as nx
@@ -80,9 +81,11 @@ def _corners(union: shapely.Geometry) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 def _wraps(corner: np.ndarray, prev: np.ndarray, nxt: np.ndarray,
            direction: np.ndarray) -> np.ndarray:
-    """True where the line through ``corner`` along ``direction`` has both ring neighbours
-    on one side: the only way a shortest path passes a corner (NaN neighbours: an end
-    point, always true)."""
+    """True where the line through ``corner`` along ``direction`` leaves both neighbours on one side.
+
+    That is the only way a shortest path passes a corner (NaN neighbours: an end
+    point, always true).
+    """
     side_prev = direction[:, 0] * (prev - corner)[:, 1] - direction[:, 1] * (prev - corner)[:, 0]
     side_next = direction[:, 0] * (nxt - corner)[:, 1] - direction[:, 1] * (nxt - corner)[:, 0]
     return ~(side_prev * side_next < -1e-12)
@@ -139,11 +142,13 @@ def shortest_path(polygons: Sequence[npt.ArrayLike], start: npt.ArrayLike,
         segments = shapely.linestrings(np.stack((nodes[i], nodes[j]), axis=1))
         hit, _ = shapely.STRtree(cores).query(segments, predicate='intersects')
         free[hit] = False
-    graph = nx.Graph()
+    graph: nx.Graph[int] = nx.Graph()
     lengths = np.hypot(d[:, 0], d[:, 1])
     graph.add_weighted_edges_from(zip(i[free].tolist(), j[free].tolist(), lengths[free].tolist()))
     try:
-        length, route = nx.single_source_dijkstra(graph, 0, 1)
+        # With a target, the stubs' union is (length, path).
+        length, route = typing.cast(tuple[float, list[int]],
+                                    nx.single_source_dijkstra(graph, 0, 1))
     except (nx.NetworkXNoPath, nx.NodeNotFound):
         return Optimum(math.inf, np.zeros((0, 2)))
     return Optimum(float(length), nodes[route])

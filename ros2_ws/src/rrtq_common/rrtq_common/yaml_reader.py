@@ -72,15 +72,17 @@ class Reader:
         if not isinstance(value, Mapping):
             raise self.error(key, f'expected a mapping, got {type(value).__name__}')
         for k in value if allowed is not None else ():
-            if k not in allowed:
+            if allowed is not None and k not in allowed:
                 allowed_list = ', '.join(allowed)
                 raise self.error(join(key, str(k)), f'unknown key (allowed: {allowed_list})')
         return dict(value)
 
     def setting(self, data: Mapping[str, Any], name: str, cls: type, section: str = '',
                 *, allow_inf: bool = False, key: str | None = None) -> Any:
-        """Setting ``name`` of the dataclass ``cls`` from ``data``: its default when absent
-        (or null), else the number checked against the range in the field's metadata.
+        """Setting ``name`` of the dataclass ``cls`` from ``data``, checked against its range.
+
+        Absent (or null), it is the field's default; else a number within the range the
+        field's metadata declares.
 
         ``key`` is the setting's key in the file when it differs from ``name``.
         """

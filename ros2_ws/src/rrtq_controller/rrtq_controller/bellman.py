@@ -72,7 +72,6 @@ def bellman_rows(basis: QuadraticBasis, pol: Policy, fixed_w: Array, dt: float,
     n, m, q = basis.n, basis.m, basis.q
     phi0 = pol.time_basis.batch(tau0)
     phi1 = pol.time_basis.batch(tau1)
-    L = phi0.shape[1]
     U0, u0, d0 = _policy_U(pol, phi0, x0)
     U1, u1, d1 = _policy_U(pol, phi1, x1)
     b0 = U0[:, basis.rows] * U0[:, basis.cols]

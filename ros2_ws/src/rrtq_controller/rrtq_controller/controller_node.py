@@ -14,7 +14,6 @@ learns the game from the measured disturbance). Paced mode uses whatever arrived
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -25,6 +24,7 @@ from rrtq_msgs.msg import ControllerState, Disturbance, PlannerStats
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import OnChange, Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
@@ -60,24 +60,16 @@ class ControllerNode(Node):
                                                qos.STREAM)
         self.cmd_pub = self.create_publisher(WrenchStamped, topics.CMD_FORCE, qos.STREAM)
         self.gate = StepGate(_requirements(self.config), lockstep=run.lockstep,
-                             dt_ns=seconds_to_ns(self.config.dt), resend=self._publish)
+                             dt_ns=seconds_to_ns(self.config.dt), resend=self._publish,
+                             on_step=self.process)
         self.last_cmd: WrenchStamped | None = None
-        for key, mtype, topic, profile in (
-                ('odom', Odometry, topics.ODOM, qos.STREAM),
-                ('plan', Path, topics.PLAN, qos.LATCHED),
-                ('stats', PlannerStats, topics.PLANNER_STATS, qos.STREAM),
-                ('disturbance', Disturbance, topics.DISTURBANCE, qos.STREAM)):
-            self.create_subscription(mtype, topic, self._input(key), profile)
+        subscribe_inputs(self, self.gate, (
+            Input('odom', Odometry, topics.ODOM, qos.STREAM),
+            Input('plan', Path, topics.PLAN, qos.LATCHED),
+            Input('stats', PlannerStats, topics.PLANNER_STATS, qos.STREAM),
+            Input('disturbance', Disturbance, topics.DISTURBANCE, qos.STREAM)))
         if not run.lockstep:
             self.create_timer(0.05, self._watch_odometry)
-
-    def _input(self, key: str) -> Callable[[Any], None]:
-        def callback(msg: Any) -> None:
-            if key == 'odom' and self.driver.odometry_arrived(time.monotonic()):
-                self.get_logger().info('odometry is back: control resumes')
-            for step in self.gate.offer(key, conv.stamp_ns(msg.header.stamp), msg):
-                self.process(step)
-        return callback
 
     def _watch_odometry(self) -> None:
         watch = self.driver.watch(time.monotonic())
@@ -88,6 +80,8 @@ class ControllerNode(Node):
             self.cmd_pub.publish(WrenchStamped(header=self.last_cmd.header))
 
     def process(self, step: Step) -> None:
+        if self.driver.odometry_arrived(time.monotonic()):
+            self.get_logger().info('odometry is back: control resumes')
         wall = time.perf_counter()
         odom, plan, dist = step['odom'], step.get('plan'), step.get('disturbance')
         t = step.stamp_ns * 1e-9

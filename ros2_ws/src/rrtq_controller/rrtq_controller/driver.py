@@ -121,8 +121,11 @@ class Driver(abc.ABC):
         return resumed
 
     def watch(self, wall: float) -> Watch:
-        """Paced mode, like Nav2's collision monitor on a timed-out source: stop pushing
-        when the odometry has gone stale (the state the command was for is unknown)."""
+        """Paced mode: stop pushing when the odometry has gone stale.
+
+        Like Nav2's collision monitor on a timed-out source: the state the command was
+        for is unknown.
+        """
         if self._last_odometry is None or not self._answered:
             return Watch.FRESH
         if wall - self._last_odometry <= self.config.stale_timeout_s:

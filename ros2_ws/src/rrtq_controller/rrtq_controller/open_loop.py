@@ -7,6 +7,7 @@ Drives the plant before (or without) the learning controller: DESIGN.md's
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 
@@ -19,7 +20,7 @@ class ForceProfile:
     forces: np.ndarray    # (K, m) N
 
     @classmethod
-    def from_rows(cls, rows: list[list[float]] | np.ndarray) -> ForceProfile:
+    def from_rows(cls, rows: Sequence[Sequence[float]] | np.ndarray) -> ForceProfile:
         table = np.asarray(rows, dtype=float).reshape(-1, 3)
         if table.size and np.any(np.diff(table[:, 0]) <= 0):
             raise ValueError('force profile times must be strictly increasing')

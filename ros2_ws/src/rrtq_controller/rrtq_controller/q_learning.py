@@ -30,7 +30,7 @@ Array = NDArray[np.float64]
 
 
 def _features(phi: Array, x: Array) -> Array:
-    """z = φ(τ) ⊗ x̄ (what μ(τ)x̄ is with μ = φ ⊗ I_n)."""
+    """The features z = φ(τ) ⊗ x̄ (what μ(τ)x̄ is with μ = φ ⊗ I_n)."""
     return (phi[:, None] * x[None, :]).ravel()
 
 

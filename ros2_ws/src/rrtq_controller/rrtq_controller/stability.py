@@ -19,14 +19,25 @@ normalised gradient-critic step (two rows) needs α_c Δt < 4, the actor steps �
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import numpy as np
+from numpy.typing import NDArray
 
-from .config import CriticLaw
+from .basis import TimeBasis
+from .config import ControllerConfig, CriticLaw, Gains
 
-if TYPE_CHECKING:
-    from .q_learning import QLearningController
+
+class Critic(Protocol):
+    """What the bounds read of a controller (:class:`rrtq_controller.q_learning.QLearningController`)."""
+
+    config: ControllerConfig
+    gains: Gains
+    gamma: float
+    robust: bool
+    time_basis: TimeBasis
+
+    def _cross(self, phi: NDArray[np.float64], which: str) -> NDArray[np.float64]: ...
 
 
 @dataclass(frozen=True)
@@ -39,7 +50,7 @@ class GainBounds:
     """ACC Theorem 2 (robust), min over τ, with the Gram-matrix reading."""
 
 
-def gain_bounds(ctrl: QLearningController, samples: int = 21) -> GainBounds:
+def gain_bounds(ctrl: Critic, samples: int = 21) -> GainBounds:
     """Evaluate RRT-QX (25) / ACC Theorem 2 with the critic's Q̂_xu(τ), Q̂_xd(τ)."""
     c = ctrl.config
     delta = c.stability_delta
@@ -65,7 +76,7 @@ def gain_bounds(ctrl: QLearningController, samples: int = 21) -> GainBounds:
     return GainBounds(alpha_a=bound_a, alpha_d=bound_d)
 
 
-def gain_warnings(ctrl: QLearningController) -> list[str]:
+def gain_warnings(ctrl: Critic) -> list[str]:
     """Human-readable warnings for every configured gain that violates a bound."""
     c, g = ctrl.config, ctrl.gains
     out: list[str] = []

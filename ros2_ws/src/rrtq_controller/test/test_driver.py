@@ -1,7 +1,6 @@
 """The driver: plans become legs, a repaired plan through the same target keeps the leg."""
 
 import numpy as np
-import pytest
 from scipy.linalg import expm
 
 from rrtq_controller.config import ControllerConfig

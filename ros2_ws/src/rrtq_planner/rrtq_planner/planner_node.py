@@ -10,7 +10,7 @@ throttled, for display.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -22,6 +22,7 @@ from visualization_msgs.msg import MarkerArray
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import OnChange, Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import RunConfig
@@ -50,13 +51,12 @@ class PlannerNode(Node):
             [Requirement('safety', followup='augmented',
                          names=lambda m: conv.stamp_ns(m.augmented_stamp))],
             lockstep=self.run.lockstep, dt_ns=seconds_to_ns(self.run.dt),
-            resend=self.stats_pub.publish)
+            resend=self.stats_pub.publish, on_step=self._on_step, held=True)
         self.create_subscription(PoseStamped, topics.GOAL_POSE, self.on_goal, qos.LATCHED)
-        for key, mtype, topic, profile in (
-                ('odom', Odometry, topics.ODOM, qos.STREAM),
-                ('augmented', ObstacleArray, topics.OBSTACLES_AUGMENTED, qos.LATCHED),
-                ('safety', SafetyStatus, topics.SAFETY_STATUS, qos.STREAM)):
-            self.create_subscription(mtype, topic, self._input(key), profile)
+        subscribe_inputs(self, self.gate, (
+            Input('odom', Odometry, topics.ODOM, qos.STREAM),
+            Input('augmented', ObstacleArray, topics.OBSTACLES_AUGMENTED, qos.LATCHED),
+            Input('safety', SafetyStatus, topics.SAFETY_STATUS, qos.STREAM)))
         if not self.run.lockstep:
             self.create_timer(0.02, self.paced_cycle)
 
@@ -66,20 +66,12 @@ class PlannerNode(Node):
             self.session = PlannerSession(self.config.rrtx(goal),
                                           np.random.default_rng(self.run.seed), self.config)
             self.get_logger().info(f'goal ({goal[0]:.2f}, {goal[1]:.2f}): planning')
-        self._run_ready_steps()
+        self.gate.release()
 
-    def _input(self, key: str) -> Callable[[Any], None]:
-        def callback(msg: Any) -> None:
-            self.gate.add(key, conv.stamp_ns(msg.header.stamp), msg)
-            self._run_ready_steps()
-        return callback
-
-    def _run_ready_steps(self) -> None:
-        if self.session is None:
-            return
-        for step in self.gate.ready():
-            if self.run.lockstep:
-                self.cycle(step, Budget(iterations=self.config.iterations_per_step))
+    def _on_step(self, step: Step) -> None:
+        """Lock-step: a cycle of the iteration budget per step (paced cycles run on a timer)."""
+        if self.run.lockstep:
+            self.cycle(step, Budget(iterations=self.config.iterations_per_step))
 
     def paced_cycle(self) -> None:
         """Paced: a cycle on the latest of every input, within a slice of wall time."""

@@ -32,8 +32,9 @@ KEEP_OUT = 0.05
 
 def kinodynamic_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
                          position: npt.ArrayLike) -> float:
-    """D_rob = |x̄₀ × x̄| / D₀ (RRT-QX eq. 6) in the plane: the robot's distance (m) from the
-    straight line through the leg's start and target.
+    """D_rob = |x̄₀ × x̄| / D₀ (RRT-QX eq. 6) in the plane.
+
+    The robot's distance (m) from the straight line through the leg's start and target.
 
     The cross product and D₀ are taken over the position components, which makes D_rob
     the perpendicular distance to the leg's line (the paper's x̄ carries velocities too,
@@ -79,7 +80,8 @@ def grow_polygon(polygon: np.ndarray, radius: float, sides: int = 32) -> np.ndar
     union = shapely.union_all(pieces)
     if union.geom_type != 'Polygon':
         union = max(getattr(union, 'geoms', [union]), key=lambda g: g.area)
-    return np.asarray(union.exterior.coords, dtype=float)[:-1]
+    assert isinstance(union, Polygon)
+    return np.array(union.exterior.coords, dtype=float)[:-1]
 
 
 def augment(polygon: npt.ArrayLike, margin: float) -> np.ndarray:
@@ -190,9 +192,11 @@ class SafetyMonitor:
 
     def step(self, stamp_ns: int, position: npt.ArrayLike, detected: OnChange[Obstacles] | None,
              leg: Leg | None) -> SafetyStep:
-        """One step (RRT-QX §5): measure D_rob on the current leg, republish the augmented
-        set when the margin has grown, the detected set changed or a grown obstacle would
-        swallow the robot, and check the true clearance.
+        """One step of the safety node (RRT-QX §5).
+
+        Measure D_rob on the current leg; republish the augmented set when the margin has
+        grown, the detected set changed or a grown obstacle would swallow the robot;
+        check the true clearance.
 
         Parameters
         ----------

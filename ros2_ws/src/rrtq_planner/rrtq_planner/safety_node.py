@@ -10,7 +10,6 @@ scenario and flags a collision the moment it happens; /safety/status goes out ev
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 from nav_msgs.msg import Odometry
@@ -19,6 +18,7 @@ from rrtq_msgs.msg import ControllerState, ObstacleArray, PerceptionStatus, Safe
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import OnChange, Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import RunConfig
@@ -44,19 +44,13 @@ class SafetyNode(Node):
             [Requirement('perception', followup='detected',
                          names=lambda m: conv.stamp_ns(m.detected_stamp)),
              Requirement('state', lag=1)],
-            lockstep=run.lockstep, dt_ns=seconds_to_ns(run.dt), resend=self.status_pub.publish)
-        for key, mtype, topic, profile in (
-                ('odom', Odometry, topics.ODOM, qos.STREAM),
-                ('detected', ObstacleArray, topics.OBSTACLES_DETECTED, qos.LATCHED),
-                ('perception', PerceptionStatus, topics.PERCEPTION_STATUS, qos.STREAM),
-                ('state', ControllerState, topics.CONTROLLER_STATE, qos.STREAM)):
-            self.create_subscription(mtype, topic, self._input(key), profile)
-
-    def _input(self, key: str) -> Callable[[Any], None]:
-        def callback(msg: Any) -> None:
-            for step in self.gate.offer(key, conv.stamp_ns(msg.header.stamp), msg):
-                self.step(step)
-        return callback
+            lockstep=run.lockstep, dt_ns=seconds_to_ns(run.dt), resend=self.status_pub.publish,
+            on_step=self.step)
+        subscribe_inputs(self, self.gate, (
+            Input('odom', Odometry, topics.ODOM, qos.STREAM),
+            Input('detected', ObstacleArray, topics.OBSTACLES_DETECTED, qos.LATCHED),
+            Input('perception', PerceptionStatus, topics.PERCEPTION_STATUS, qos.STREAM),
+            Input('state', ControllerState, topics.CONTROLLER_STATE, qos.STREAM)))
 
     def step(self, step: Step) -> None:
         odom, detected = step['odom'], step.get('detected')

@@ -61,8 +61,11 @@ class Plan:
 
 @dataclasses.dataclass(frozen=True)
 class Budget:
-    """How much refinement one cycle may do: ``iterations`` (lock-step), or sampling in
-    chunks until the clock passes ``deadline`` (paced)."""
+    """How much refinement one cycle may do.
+
+    ``iterations`` (lock-step), or sampling in chunks until the clock passes
+    ``deadline`` (paced).
+    """
 
     iterations: int = 0
     deadline: float | None = None

@@ -11,7 +11,7 @@ from rrtq_sim.perception import ObstacleEvent, Observation
 
 
 def disturbance_msg(ns: int, model: str, value: np.ndarray) -> Disturbance:
-    """d (its model named) in ``map`` at ``ns``."""
+    """The disturbance d (its model named) in ``map`` at ``ns``."""
     msg = Disturbance(model=model, value=[float(v) for v in value])
     msg.header.stamp = time_msg(ns)
     msg.header.frame_id = MAP_FRAME

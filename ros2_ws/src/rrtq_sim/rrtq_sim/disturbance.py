@@ -57,8 +57,11 @@ class DisturbanceConfig:
 
 @dataclass(frozen=True, eq=False, kw_only=True)
 class WorstCaseGame:
-    """The zero-sum game the worst-case disturbance plays: the true plant, the controller's
-    cost weights and horizon (no defaults: the orchestrator hands them over)."""
+    """The zero-sum game the worst-case disturbance plays.
+
+    The true plant, the controller's cost weights and horizon (no defaults: the
+    orchestrator hands them over).
+    """
 
     A: np.ndarray = setting(rows='n', doc='true state matrix A (n x n)')
     B: np.ndarray = setting(rows='n', doc='true input matrix B (n x m)')
@@ -189,7 +192,7 @@ class DisturbanceGenerator:
 
     def value_at(self, t: float, x: npt.ArrayLike, target: npt.ArrayLike | None,
                  tau: float) -> np.ndarray:
-        """d at ``t`` for the full state ``x`` on a leg to ``target`` (m, at rest).
+        """The disturbance at ``t`` for the full state ``x`` on a leg to ``target`` (m, at rest).
 
         The game's state is relative to the leg's target held at rest: its position is
         subtracted from the first two components. Without a leg (``target`` None) the

@@ -8,7 +8,6 @@ with P the game Riccati solution of the controller's current leg
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -18,6 +17,7 @@ from rrtq_msgs.msg import ControllerState, Disturbance
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
@@ -40,17 +40,10 @@ class DisturbanceNode(Node):
         self.pub = self.create_publisher(Disturbance, topics.DISTURBANCE, qos.STREAM)
         # The worst case needs the controller's leg of the same step, in either mode.
         self.gate = StepGate([Requirement('state')] if worst else [], lockstep=True,
-                             ordered=False, resend=self.pub.publish)
-        self.create_subscription(Odometry, topics.ODOM, self._input('odom'), qos.STREAM)
-        if worst:
-            self.create_subscription(ControllerState, topics.CONTROLLER_STATE,
-                                     self._input('state'), qos.STREAM)
-
-    def _input(self, key: str) -> Callable[[Any], None]:
-        def callback(msg: Any) -> None:
-            for step in self.gate.offer(key, conv.stamp_ns(msg.header.stamp), msg):
-                self.publish(step)
-        return callback
+                             ordered=False, resend=self.pub.publish, on_step=self.publish)
+        subscribe_inputs(self, self.gate, [Input('odom', Odometry, topics.ODOM, qos.STREAM)] + (
+            [Input('state', ControllerState, topics.CONTROLLER_STATE, qos.STREAM)] if worst
+            else []))
 
     def publish(self, step: Step) -> None:
         state = step.get('state')

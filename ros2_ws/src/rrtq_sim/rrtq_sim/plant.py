@@ -251,7 +251,7 @@ class Plant:
             raise ValueError(f'x must have shape ({self._n},), got {np.shape(x)}')
         dd = np.zeros(self._q) if d is None else np.asarray(d, dtype=float).reshape(-1)
         if dd.shape != (self._q,):
-            raise ValueError(f'd must have shape ({self._q},), got {np.shape(d)}')
+            raise ValueError(f'd must have shape ({self._q},), got {np.shape(np.asarray(d))}')
         if not np.all(np.isfinite(dd)):
             raise ValueError(f'd must be finite, got {dd}')
         anc = np.asarray(anchor, dtype=float).reshape(-1)

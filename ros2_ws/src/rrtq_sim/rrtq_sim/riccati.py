@@ -205,6 +205,7 @@ def solve_riccati(
         events=blow_up,
     )
     if res.status == 1:
+        assert res.t_events is not None
         tau_e = float(res.t_events[0][0])
         raise RiccatiEscape(
             f'Riccati solution escapes at time-to-go {tau_e:.6g} s < T = {T:.6g} s', tau_e

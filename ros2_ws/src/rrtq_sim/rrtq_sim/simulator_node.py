@@ -9,7 +9,6 @@ function of its inputs alone. Paced (``speed`` > 0): a wall timer steps the plan
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from typing import Any
 
 from geometry_msgs.msg import WrenchStamped
@@ -21,7 +20,8 @@ from std_msgs.msg import Empty
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
-from rrtq_common.lockstep import Requirement, StepGate
+from rrtq_common.inputs import Input, subscribe_inputs
+from rrtq_common.lockstep import Requirement, Step, StepGate
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
 from rrtq_sim.disturbance import DisturbanceConfig
@@ -56,10 +56,11 @@ class SimulatorNode(Node):
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK, qos.CLOCK)
         self.odom_pub = self.create_publisher(Odometry, topics.ODOM, qos.STREAM)
         self.gate = StepGate([Requirement(key) for key in self.config.acks],
-                             lockstep=self.config.speed == 0.0, driver=None, ordered=False)
-        for key in sorted(set(self.config.acks) | set(INPUTS)):
-            topic, mtype = ACK_TOPICS[key]
-            self.create_subscription(mtype, topic, self._input(key), qos.STREAM)
+                             lockstep=self.config.speed == 0.0, driver=None, ordered=False,
+                             on_step=self._on_step)
+        subscribe_inputs(self, self.gate, [
+            Input(key, ACK_TOPICS[key][1], ACK_TOPICS[key][0], qos.STREAM)
+            for key in sorted(set(self.config.acks) | set(INPUTS))])
         self.create_subscription(Empty, topics.SIMULATOR_PAUSE, self._pause, qos.LATCHED)
         self._ready_since: float | None = None
         self._start_timer = self.create_timer(0.02, self._try_start)
@@ -70,16 +71,14 @@ class SimulatorNode(Node):
         return self.sim.rejected
 
     # -- inputs ---------------------------------------------------------------
-    def _input(self, key: str) -> Callable[[Any], None]:
-        def callback(msg: Any) -> None:
-            for step in self.gate.offer(key, conv.stamp_ns(msg.header.stamp), msg):
-                if self.gate.lockstep and step.stamp_ns != self.sim.now_ns:
-                    continue
-                for name, message in sorted(step.messages.items()):
-                    self._hold(name, message)
-                if self.gate.lockstep:
-                    self.advance()
-        return callback
+    def _on_step(self, step: Step) -> None:
+        """Hold the inputs; lock-step: take the next step once this one is acknowledged."""
+        if self.gate.lockstep and step.stamp_ns != self.sim.now_ns:
+            return
+        for name, message in sorted(step.messages.items()):
+            self._hold(name, message)
+        if self.gate.lockstep:
+            self.advance()
 
     def _hold(self, key: str, msg: Any) -> None:
         if key == 'cmd_force':
@@ -127,8 +126,11 @@ class SimulatorNode(Node):
             self.create_timer(self.config.resend_period_s, self._resend_if_stalled)
 
     def _pause(self, _msg: Empty) -> None:
-        """The mission is over: stop stepping, but stay up so that every reader can
-        still take (and have resent) the last steps."""
+        """The mission is over: stop stepping.
+
+        The node stays up, so that every reader can still take (and have resent) the
+        last steps.
+        """
         self.sim.paused = True
 
     def advance(self) -> None:

@@ -23,7 +23,8 @@ from rrtq_msgs.msg import ObstacleArray, PerceptionStatus
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
-from rrtq_common.lockstep import StepGate
+from rrtq_common.inputs import Input, subscribe_inputs
+from rrtq_common.lockstep import Step, StepGate
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.world import ObstacleSpec, TrueObstacles
 from rrtq_common.world_yaml import WorldSource, load_world
@@ -44,23 +45,24 @@ class SpawnerNode(Node):
                                                 qos.STREAM)
         self.truth_pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_TRUTH,
                                                qos.LATCHED)
-        self.gate = StepGate([], lockstep=True, ordered=False, resend=self.status_pub.publish)
+        self.gate = StepGate([], lockstep=True, ordered=False, resend=self.status_pub.publish,
+                             on_step=self.on_odom)
         self.detected_stamp = 0
-        self.create_subscription(Odometry, topics.ODOM, self.on_odom, qos.STREAM)
+        subscribe_inputs(self, self.gate, [Input('odom', Odometry, topics.ODOM, qos.STREAM)])
         self.publish_map(0)
         self.publish_truth(0, self.perception.take_truth_change())
 
-    def on_odom(self, msg: Odometry) -> None:
-        for step in self.gate.offer('odom', conv.stamp_ns(msg.header.stamp), msg):
-            seen = self.perception.observe(conv.odometry_state(msg)[:2], step.stamp_ns * 1e-9)
-            self._log(step.stamp_ns * 1e-9, seen)
-            if seen.events:
-                self.publish_map(step.stamp_ns)
-            self.publish_truth(step.stamp_ns, seen.truth)
-            status = perception_status_msg(msg.header, self.detected_stamp,
-                                           len(self.perception.known_ids), seen)
-            self.gate.answered(step.stamp_ns, status)
-            self.status_pub.publish(status)
+    def on_odom(self, step: Step) -> None:
+        odom = step['odom']
+        seen = self.perception.observe(conv.odometry_state(odom)[:2], step.stamp_ns * 1e-9)
+        self._log(step.stamp_ns * 1e-9, seen)
+        if seen.events:
+            self.publish_map(step.stamp_ns)
+        self.publish_truth(step.stamp_ns, seen.truth)
+        status = perception_status_msg(odom.header, self.detected_stamp,
+                                       len(self.perception.known_ids), seen)
+        self.gate.answered(step.stamp_ns, status)
+        self.status_pub.publish(status)
 
     def _log(self, t: float, seen: Observation) -> None:
         for event, oid in seen.events:

@@ -155,8 +155,10 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
 
 def read_planner(r: Reader, raw: Any,
                  world: World) -> tuple[PlannerConfig, SafetyConfig, float]:
-    """``planner:``: the planner node's settings, the safety node's growth threshold and
-    the referee's goal tolerance."""
+    """``planner:``: the planner node's settings, and two it hands on.
+
+    Those are the safety node's growth threshold and the referee's goal tolerance.
+    """
     key = 'planner'
     data = r.mapping({} if raw is None else raw, key, tuple(_PLANNER_KEYS))
     values = {name: r.setting(data, name, cls, key) for name, cls in _PLANNER_KEYS.items()}
