@@ -25,7 +25,9 @@ from matplotlib.patches import Circle, Polygon as PolygonPatch  # noqa: E402
 from rrtq_bringup.leg_table import LegTable, leg_table  # noqa: E402
 from rrtq_bringup.leg_table import summary as leg_summary  # noqa: E402
 from rrtq_bringup.run_data import RunData, embedded_scenario, read_run, recorded_scenario  # noqa: E402
+from rrtq_bringup.mission import MissionConfig  # noqa: E402
 from rrtq_common.polygon_set import PolygonSet  # noqa: E402
+from rrtq_common.yaml_reader import field_default  # noqa: E402
 
 
 
@@ -56,7 +58,8 @@ def true_clearance(data: RunData, robot_radius: float) -> np.ndarray:
     return out - robot_radius
 
 
-def summarise(data: RunData, scenario: dict, goal_tolerance: float = 0.5) -> dict:
+def summarise(data: RunData, scenario: dict,
+              goal_tolerance: float = field_default(MissionConfig, 'goal_tolerance')) -> dict:
     """The run's summary from its recording."""
     robot_radius = float(scenario.get('robot_radius', 0.0))
     positions = data.odom_x[:, :2]

@@ -15,6 +15,8 @@ from nav_msgs.msg import Odometry, Path
 from rosgraph_msgs.msg import Clock
 from rrtq_msgs.msg import Obstacle, ObstacleArray
 
+from rrtq_common.lockstep import OnChange
+
 MAP_FRAME = 'map'
 ROBOT_FRAME = 'base_link'
 
@@ -103,3 +105,17 @@ def path_waypoints(msg: Path) -> np.ndarray:
     """(K, 2) waypoints of a path, m."""
     return np.array([[p.pose.position.x, p.pose.position.y] for p in msg.poses],
                     dtype=float).reshape(-1, 2)
+
+
+def changed_path(msg: Path | None) -> OnChange[np.ndarray] | None:
+    """A latched path as an on-change input: its stamp, its waypoints read on demand."""
+    if msg is None:
+        return None
+    return OnChange(stamp_ns(msg.header.stamp), lambda: path_waypoints(msg))
+
+
+def changed_obstacles(msg: ObstacleArray | None) -> OnChange[list[tuple[str, np.ndarray]]] | None:
+    """A latched obstacle set as an on-change input: its stamp, the polygons read on demand."""
+    if msg is None:
+        return None
+    return OnChange(stamp_ns(msg.header.stamp), lambda: obstacle_array(msg))

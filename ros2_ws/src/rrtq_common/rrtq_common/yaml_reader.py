@@ -124,11 +124,6 @@ class Reader:
             raise self.error(key, f'must be >= 0, got {x}')
         return x
 
-    def optional_positive(self, data: Mapping[str, Any], name: str, key: str) -> float | None:
-        if data.get(name) is None:
-            return None
-        return self.number(data[name], join(key, name), positive=True)
-
     def boolean(self, value: Any, key: str) -> bool:
         if not isinstance(value, bool):
             raise self.error(key, f'expected true or false, got {value!r}')

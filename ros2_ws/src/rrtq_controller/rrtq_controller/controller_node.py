@@ -25,7 +25,7 @@ from rrtq_msgs.msg import ControllerState, Disturbance, PlannerStats
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
 from rrtq_common.inputs import Input, subscribe_inputs
-from rrtq_common.lockstep import OnChange, Requirement, Step, StepGate, seconds_to_ns
+from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
 from rrtq_controller.config import ControllerConfig, Variant
@@ -85,11 +85,8 @@ class ControllerNode(Node):
         wall = time.perf_counter()
         odom, plan, dist = step['odom'], step.get('plan'), step.get('disturbance')
         t = step.stamp_ns * 1e-9
-        out = self.driver.control(
-            t, conv.odometry_state(odom),
-            None if plan is None else OnChange(conv.stamp_ns(plan.header.stamp),
-                                               lambda: conv.path_waypoints(plan)),
-            None if dist is None else dist.value)
+        out = self.driver.control(t, conv.odometry_state(odom), conv.changed_path(plan),
+                                  None if dist is None else dist.value)
         if out is None:
             self.get_logger().error(f'non-finite odometry at t={t:.2f} s: commanding zero',
                                     throttle_duration_sec=1.0)

@@ -10,7 +10,6 @@ throttled, for display.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -23,17 +22,11 @@ from visualization_msgs.msg import MarkerArray
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
 from rrtq_common.inputs import Input, subscribe_inputs
-from rrtq_common.lockstep import OnChange, Requirement, Step, StepGate, seconds_to_ns
+from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import RunConfig
 from rrtq_planner.conversions import stats_msg, tree_msg
 from rrtq_planner.session import Budget, PlannerConfig, PlannerSession
-
-
-def _obstacles(msg: ObstacleArray | None) -> OnChange[Mapping[str, np.ndarray]] | None:
-    if msg is None:
-        return None
-    return OnChange(conv.stamp_ns(msg.header.stamp), lambda: dict(conv.obstacle_array(msg)))
 
 
 class PlannerNode(Node):
@@ -85,7 +78,7 @@ class PlannerNode(Node):
         """Repair for obstacle changes, follow the robot, refine, publish."""
         assert self.session is not None
         done = self.session.cycle(step.stamp_ns, conv.odometry_state(step['odom'])[:2],
-                                  _obstacles(step.get('augmented')), budget)
+                                  conv.changed_obstacles(step.get('augmented')), budget)
         if done.changed:
             self.plan_pub.publish(conv.path_msg(step.stamp_ns, done.plan.waypoints))
         stats = stats_msg(done)

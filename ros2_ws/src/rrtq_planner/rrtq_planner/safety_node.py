@@ -19,7 +19,7 @@ from rrtq_msgs.msg import ControllerState, ObstacleArray, PerceptionStatus, Safe
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
 from rrtq_common.inputs import Input, subscribe_inputs
-from rrtq_common.lockstep import OnChange, Requirement, Step, StepGate, seconds_to_ns
+from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import RunConfig
 from rrtq_common.world import TrueObstacles
@@ -55,11 +55,8 @@ class SafetyNode(Node):
     def step(self, step: Step) -> None:
         odom, detected = step['odom'], step.get('detected')
         position = conv.odometry_state(odom)[:2]
-        done = self.monitor.step(
-            step.stamp_ns, position,
-            None if detected is None else OnChange(conv.stamp_ns(detected.header.stamp),
-                                                   lambda: conv.obstacle_array(detected)),
-            leg_of(step.get('state')))
+        done = self.monitor.step(step.stamp_ns, position, conv.changed_obstacles(detected),
+                                 leg_of(step.get('state')))
         if done.augmented is not None:
             self.aug_pub.publish(conv.obstacle_array_msg(step.stamp_ns, done.augmented,
                                                          done.margin))

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -169,12 +169,13 @@ class PlannerSession:
         return done
 
     def cycle(self, stamp_ns: int, position: np.ndarray,
-              obstacles: OnChange[Mapping[str, np.ndarray]] | None, budget: Budget) -> Cycle:
+              obstacles: OnChange[Iterable[tuple[str, np.ndarray]]] | None,
+              budget: Budget) -> Cycle:
         """Repair for an obstacle set that changed, follow the robot, refine, take the plan."""
         if obstacles is not None and obstacles.stamp_ns != self._obstacles_stamp:
             self._obstacles_stamp = obstacles.stamp_ns
             start = self._clock()
-            if self.set_obstacles(obstacles.read()):
+            if self.set_obstacles(dict(obstacles.read())):
                 self._repair_ms = (self._clock() - start) * 1e3
         self.set_robot(position)
         start = self._clock()
