@@ -87,6 +87,13 @@ def _points(points: npt.ArrayLike) -> np.ndarray:
     return pts
 
 
+def _query(points: npt.ArrayLike,
+           polygon: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Query points (..., 2), the same flattened (N, 2), the polygon (k, 2)."""
+    pts = _points(points)
+    return pts, pts.reshape(-1, 2), np.asarray(polygon, dtype=float)
+
+
 def point_in_polygon(points: npt.ArrayLike, polygon: npt.ArrayLike) -> np.ndarray:
     """Even-odd containment test.
 
@@ -102,9 +109,7 @@ def point_in_polygon(points: npt.ArrayLike, polygon: npt.ArrayLike) -> np.ndarra
         Points exactly on the boundary may go either way; use
         :func:`point_polygon_distance` when the boundary matters.
     """
-    pts = _points(points)
-    flat = pts.reshape(-1, 2)
-    poly = np.asarray(polygon, dtype=float)
+    pts, flat, poly = _query(points, polygon)
     x0, y0 = poly[:, 0], poly[:, 1]
     x1, y1 = np.roll(x0, -1), np.roll(y0, -1)
     px, py = flat[:, 0:1], flat[:, 1:2]  # (N, 1) against (k,) edges
@@ -130,9 +135,7 @@ def point_polygon_distance(points: npt.ArrayLike, polygon: npt.ArrayLike) -> np.
     numpy.ndarray, shape (...)
         Distance in m.
     """
-    pts = _points(points)
-    flat = pts.reshape(-1, 2)
-    poly = np.asarray(polygon, dtype=float)
+    pts, flat, poly = _query(points, polygon)
     a = poly[None, :, :]  # (1, k, 2)
     ab = np.roll(poly, -1, axis=0)[None, :, :] - a
     ap = flat[:, None, :] - a  # (N, k, 2)
