@@ -112,7 +112,7 @@ def _prepare(base: Scenario, document: dict[str, Any], seeds: range, runs: pathl
             'route_m': layout.route.length, 'config': dataclasses.asdict(config)},
             indent=1) + '\n')
         load_scenario(path)
-        to_disc = max(0.0, layout.optimum.length - base.planner['goal_tolerance'])
+        to_disc = max(0.0, layout.optimum.length - base.goal_tolerance)
         jobs.append(Job(layout.seed, out, path, to_disc))
     return jobs
 
@@ -270,7 +270,7 @@ def _layout_text(config: LayoutConfig, base: Scenario) -> str:
             f'{base.appear_clearance:g} m of the robot (`appear_clearance`). Composed mode, '
             'lock-step. Optimum: shortest path with every obstacle present, grown by the '
             f'robot radius ({base.robot_radius:g} m), on the visibility graph, to within '
-            f"the goal tolerance ({base.planner['goal_tolerance']:g} m) where a run stops.")
+            f"the goal tolerance ({base.goal_tolerance:g} m) where a run stops.")
 
 
 def main(argv: list[str] | None = None) -> int:
