@@ -2,7 +2,7 @@
 
 Every problem is reported as a :class:`ScenarioError` naming the file and the dotted
 key (``plant.mass``, ``obstacles[2].polygon``), so the orchestrator can print it and
-exit with code 2 before anything starts.  The schema is DESIGN.md, "Scenario file".
+exit with code 2 before anything starts.  The schema is docs/scenarios.md.
 """
 
 from __future__ import annotations
@@ -65,7 +65,7 @@ class ScenarioError(Exception):
 
 
 class SpringAnchor(enum.StrEnum):
-    """Where the rover's spring is anchored (DESIGN.md, Plant)."""
+    """Where the rover's spring is anchored (docs/design.md, Plant)."""
 
     LEG_TARGET = 'leg_target'
     WORLD_ORIGIN = 'world_origin'
@@ -607,7 +607,7 @@ def _timing(r: _Reader, data: Mapping[str, Any], key: str) -> tuple[float, float
         data.get('vanish_at', math.inf), _join(key, 'vanish_at'), nonnegative=True, allow_inf=True
     )
     # appear_at == vanish_at is allowed: an obstacle that never exists but may be
-    # believed (known: true, vanish_at: 0 in DESIGN.md; Otte flag -1).
+    # believed (known: true, vanish_at: 0 in the example of docs/design.md; Otte flag -1).
     if appear > vanish:
         raise r.error(
             _join(key, 'vanish_at'), f'vanish_at = {vanish} is before appear_at = {appear}'
