@@ -21,13 +21,14 @@ import subprocess
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
 _SHARED = 'sha' + 'red'
+_ELSEWHERE = ('DES' + 'IGN', 'ST' + 'YLE', 'ROS2_ON' + '_PYPI')   # documents that lived there
 PATTERNS = (
     (re.compile(r'(?:\.\./)+' + _SHARED + r'\b'), 'the sibling directory beside the clone'),
     (re.compile(re.escape('/work/' + _SHARED)), "the sibling directory's absolute path"),
     (re.compile(r'\bparents?\b.*/\s*[\'"]' + _SHARED + r'[\'"]'),
      'a path to the sibling directory built in code'),
-    (re.compile(r'\b(?:' + '|'.join(('DES' + 'IGN', 'ST' + 'YLE', 'ROS2_ON' + '_PYPI'))
-                + r')\.md\b'), 'a document that is not in the repository'),
+    (re.compile(r'\b(?:' + '|'.join(_ELSEWHERE) + r')\.md\b'),
+     'a document that is not in the repository'),
 )
 # Not part of the repository: environments, build products, run outputs.
 UNTRACKED_DIRS = frozenset({'.git', '.venv', 'build', 'install', 'log', 'runs', '.stamps',
@@ -79,11 +80,11 @@ def _plant(root: pathlib.Path) -> dict[str, str]:
     """Files with and without outside references; returns name -> text."""
     sibling = '../' + _SHARED
     files = {
-        'README.md': f'See [the design]({sibling}/DESIGN.md) and docs/design.md.\nfine\n',
+        'README.md': f'See [the design]({sibling}/{_ELSEWHERE[0]}.md), docs/design.md.\nfine\n',
         'docs/a.md': f'fine\nfrom scenarios/: ../{sibling}/peer-envs/X.txt\n',
         'tests/t.py': f"peer = ROOT.parent / '{_SHARED}' / 'x'\nok = ROOT / 'shared_data'\n",
         'ci.sh': f'cp /work/{_SHARED}/papers/x.txt .\n',
-        'notes.txt': 'read STYLE.md first; docs/design.md is ours\n',
+        'notes.txt': f'read {_ELSEWHERE[1]}.md first; docs/design.md is ours\n',
         'clean.py': "print('shared memory, sharedctypes, docs/design.md')\n",
         '.venv/lib/x.py': f'# {sibling}\n',
         'runs/r/summary.json': f'"{sibling}"\n',
