@@ -1,4 +1,4 @@
-"""Point the ROS wheels' CMake exports at this interpreter (ROS2_ON_PYPI.md, quirk 1)."""
+"""Point the ROS wheels' CMake exports at this interpreter (docs/design.md, Setup, quirk 1)."""
 import pathlib
 import sys
 import sysconfig

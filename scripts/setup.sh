@@ -26,7 +26,7 @@ if [ "$(cat $stamps/pip 2>/dev/null)" != "$req" ]; then
 fi
 
 if [ ! -f $stamps/cmakefix ]; then
-  # ROS2_ON_PYPI.md quirk 1: the wheels' CMake exports name the wheel builder's Python.
+  # docs/design.md, Setup, quirk 1: the wheels' CMake exports name the wheel builder's Python.
   step "rewriting the wheels' CMake include paths to this Python"
   .venv/bin/python scripts/fix_cmake_paths.py .venv
   touch $stamps/cmakefix

@@ -189,12 +189,13 @@ def test_shipped_discoverable_scenarios_load(name):
     assert (False, True, True, False) in kinds           # appears during the run
 
 
-def test_the_otte_copy_keeps_the_peer_geometry():
-    peer = ROOT.parent / 'shared' / 'peer-envs' / 'rand_Static.txt'
-    assert peer.exists(), f'{peer}: ../shared (the peer environments) must be beside the clone'
+def test_the_otte_copy_keeps_the_original_geometry():
+    # the original as vendored, byte for byte, with its provenance and licence beside it
+    original = ROOT / 'ros2_ws/src/rrtq_sim/test/data/otte/rand_Static.txt'
     ours = load_otte(ROOT / 'scenarios' / 'envs' / 'rand_discoverable.txt')
-    theirs = load_otte(peer)
+    theirs = load_otte(original)
     assert len(ours) == len(theirs) == 35
+    assert {flag for _, flag in theirs} == {0}
     for (a, _), (b, _) in zip(ours, theirs):
         np.testing.assert_array_equal(a, b)
     assert {flag for _, flag in ours} == {-1, 0, 1}

@@ -1,4 +1,4 @@
-"""Scenario files: the DESIGN.md example loads, defaults apply, every bad input names its key."""
+"""Scenario files: the contract's example (docs/design.md) loads, defaults apply, every bad input names its key."""
 
 from __future__ import annotations
 

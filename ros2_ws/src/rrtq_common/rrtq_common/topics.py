@@ -1,4 +1,4 @@
-"""Topic names of the rrtq graph (DESIGN.md, "Node graph and topics")."""
+"""Topic names of the rrtq graph (docs/design.md, "Node graph and topics")."""
 
 CLOCK = '/clock'
 ODOM = '/odom'

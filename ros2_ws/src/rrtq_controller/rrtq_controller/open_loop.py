@@ -1,6 +1,6 @@
 """Open-loop force player: a scripted, piecewise-constant force profile (no learning).
 
-Drives the plant before (or without) the learning controller: DESIGN.md's
+Drives the plant before (or without) the learning controller: docs/design.md's
 ``controller: {variant: open_loop, forces: [[t0, fx, fy], ...]}``.
 """
 

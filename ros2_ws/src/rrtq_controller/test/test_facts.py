@@ -1,4 +1,4 @@
-"""DESIGN.md's claimed facts about the controller, checked against the true plants."""
+"""The known facts about the controller (docs/design.md, Controller), checked against the true plants."""
 
 import numpy as np
 
@@ -51,7 +51,7 @@ def test_time_basis_represents_the_finite_horizon_gain():
     for k, r in ((20.0, 2.0), (0.0, 0.02)):
         R = r * np.eye(2)
         assert _fit_error((0.0,), k, R, taus) > 0.7
-        # DESIGN says ~3 %: it is 4.5 % (paper) and 8 % (no spring) of max |K| at worst
+        # the contract says ~3 %: it is 4.5 % (paper) and 8 % (no spring) of max |K| at worst
         assert _fit_error((0.0, 1.0, 2.0, 3.0), k, R, taus) < 0.09
         # but on what legs visit (they end at D <= 0.15 D0 after ~5 s), τ in [5, 10]:
         assert _fit_error((0.0,), k, R, np.linspace(5.0, 10.0, 101)) < 0.035
@@ -87,7 +87,7 @@ def test_plain_euler_actor_diverges_where_the_normalised_step_does_not():
 
 
 def test_design_example_gamma_is_below_the_game_bound():
-    """γ = 3 (DESIGN's example) lies below the finite-horizon bound for the rover without spring."""
+    """γ = 3 (the contract's earlier example) lies below the finite-horizon bound for the rover without spring."""
     A, B = ref.rover(stiffness=0.0)
     g = ref.game_gamma_bound(A, B, M, 0.02 * np.eye(2), P_T, 10.0, ref.MAXWELL_SLIP_F)
     assert 7.0 < g < 8.0

@@ -1,6 +1,6 @@
 """What the robot knows about the obstacles: truth versus map inside the sensing disc.
 
-DESIGN.md, Perception: at every step an existing obstacle that intersects the
+docs/design.md, Perception: at every step an existing obstacle that intersects the
 perception disc becomes known (added once); a known obstacle that no longer exists is
 removed when its location is inside the disc.  What exists is
 :class:`rrtq_common.world.TrueObstacles`: the scenario's timing, except that nothing
