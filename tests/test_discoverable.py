@@ -29,6 +29,7 @@ from rrtq_bringup.run_data import read_run
 from rrtq_bringup.scenario import load_scenario
 from rrtq_common.geometry import point_in_polygon, point_polygon_distance
 from rrtq_common.otte import load_otte
+from rrtq_testing.paths import OTTE
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -191,7 +192,7 @@ def test_shipped_discoverable_scenarios_load(name):
 
 def test_the_otte_copy_keeps_the_original_geometry():
     # the original as vendored, byte for byte, with its provenance and licence beside it
-    original = ROOT / 'ros2_ws/src/rrtq_sim/test/data/otte/rand_Static.txt'
+    original = OTTE / 'rand_Static.txt'
     ours = load_otte(ROOT / 'scenarios' / 'envs' / 'rand_discoverable.txt')
     theirs = load_otte(original)
     assert len(ours) == len(theirs) == 35

@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
+import importlib
 import pathlib
 import re
 import shutil
 
-from rrtq_sim import topics
-from rrtq_sim.scenario import load_scenario
+from rrtq_bringup.scenario import load_scenario
+from rrtq_common import topics
+from rrtq_testing.paths import OTTE
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 DESIGN = ROOT / 'docs' / 'design.md'
 DOCUMENTS = [ROOT / 'README.md', *sorted((ROOT / 'docs').glob('*.md')),
              ROOT / 'scenarios' / 'envs' / 'README.md',
-             ROOT / 'ros2_ws' / 'src' / 'rrtq_sim' / 'test' / 'data' / 'otte' / 'README.md']
+             OTTE / 'README.md']
 LINK = re.compile(r'\[[^\]]*\]\(([^)\s]+)\)')
 
 
@@ -25,6 +27,37 @@ def test_every_relative_link_of_the_documents_resolves_inside_the_repository():
             path = (doc.parent / target.split('#')[0]).resolve()
             assert path.is_relative_to(ROOT), f'{doc.name}: {target} leaves the repository'
             assert path.exists(), f'{doc.name}: {target} does not exist'
+
+
+DOTTED = re.compile(r'\b(rrtq_[a-z_]+(?:\.[A-Za-z_]\w*)+)')
+
+
+def _resolves(name: str) -> bool:
+    """``rrtq_pkg.module[.attribute...]`` names an importable module and its attributes."""
+    parts = name.split('.')
+    for i in range(len(parts), 0, -1):
+        try:
+            obj = importlib.import_module('.'.join(parts[:i]))
+        except ImportError:
+            continue
+        for attr in parts[i:]:
+            if not hasattr(obj, attr):
+                return False
+            obj = getattr(obj, attr)
+        return True
+    return False
+
+
+def test_every_module_the_documents_name_exists():
+    stale = [f'{doc.name}: {name}' for doc in DOCUMENTS
+             for name in sorted(set(DOTTED.findall(doc.read_text()))) if not _resolves(name)]
+    assert not stale, stale
+
+
+def test_the_name_check_tells_a_stale_name():
+    assert _resolves('rrtq_common.lockstep.StepGate') and _resolves('rrtq_planner.safety')
+    assert not _resolves('rrtq_sim.lockstep.StepInputs')     # moved to rrtq_common
+    assert not _resolves('rrtq_planner.safety.NoSuchThing')
 
 
 def _section(text: str, title: str) -> str:

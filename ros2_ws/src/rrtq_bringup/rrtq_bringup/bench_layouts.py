@@ -12,7 +12,7 @@ A layout replaces the base scenario's obstacles with
 
 No obstacle comes within ``end_clearance`` of the robot's disc at the start or the goal,
 and the goal stays reachable with every obstacle present at once (checked on the
-visibility graph, :mod:`rrtq_bringup.bench_optimum`; otherwise the layout is drawn
+visibility graph, :mod:`rrtq_common.optimum`; otherwise the layout is drawn
 again). Where the robot really is when an obstacle appears is not known here: the
 simulator holds back one that would appear on the robot (``appear_clearance``,
 :class:`rrtq_sim.perception.TrueObstacles`). Everything follows from the seed.

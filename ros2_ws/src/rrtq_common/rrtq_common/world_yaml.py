@@ -39,7 +39,7 @@ def _timing(r: Reader, data: Mapping[str, Any], key: str) -> tuple[float, float,
         data.get('vanish_at', math.inf), join(key, 'vanish_at'), nonnegative=True, allow_inf=True
     )
     # appear_at == vanish_at is allowed: an obstacle that never exists but may be
-    # believed (known: true, vanish_at: 0 in DESIGN.md; Otte flag -1).
+    # believed (known: true, vanish_at: 0 in the example of docs/design.md; Otte flag -1).
     if appear > vanish:
         raise r.error(
             join(key, 'vanish_at'), f'vanish_at = {vanish} is before appear_at = {appear}'

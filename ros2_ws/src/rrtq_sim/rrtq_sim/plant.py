@@ -20,7 +20,7 @@ __all__ = ['SpringAnchor', 'PlantModel', 'PlantConfig', 'rover_matrices', 'Plant
 
 
 class SpringAnchor(enum.StrEnum):
-    """Where the rover's spring is anchored (DESIGN.md, Plant)."""
+    """Where the rover's spring is anchored (docs/design.md, Plant)."""
 
     LEG_TARGET = 'leg_target'
     WORLD_ORIGIN = 'world_origin'

@@ -1,6 +1,6 @@
 """Scenario files (YAML): the schema, its strict reading, the builders of its cores.
 
-The schema is DESIGN.md's "Scenario file"; ``docs/scenarios.md`` documents every key.
+The contract is docs/design.md's "Scenario contract"; ``docs/scenarios.md`` documents every key.
 """
 
 from rrtq_bringup.scenario.loader import (build_disturbance, build_plant, game_riccati,

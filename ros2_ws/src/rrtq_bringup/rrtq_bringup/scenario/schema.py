@@ -1,6 +1,6 @@
 """The scenario: a world and the settings of every core, composed, not copied.
 
-DESIGN.md's "Scenario file" (and ``docs/scenarios.md``): the world keys are
+docs/design.md's "Scenario contract" (and ``docs/scenarios.md``): the world keys are
 :class:`rrtq_common.world.World`'s; each section is the settings dataclass of the core
 it configures — ``plant:`` :class:`rrtq_sim.plant.PlantConfig`, ``disturbance:``
 :class:`rrtq_sim.disturbance.DisturbanceConfig`, ``controller:``
