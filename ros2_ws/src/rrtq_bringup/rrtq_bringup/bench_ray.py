@@ -1,0 +1,252 @@
+"""The Ray engine of ``rrtq bench`` (``--engine ray [--address ADDR]``).
+
+Each run is a Ray task asking for one CPU, so Ray starts it on whichever node has a
+free core.  The task writes the run's scenario into a temporary directory of its
+node, runs ``rrtq run`` there (composed, lock-step: the same as the local engine,
+so the same seed gives the same run), takes the ``ROS_DOMAIN_ID`` lock of that host
+as every ``rrtq run`` does (``/tmp/rrtq-domains``: unique per host), and returns the
+run directory (recording, summary, logs) as a tar archive, which the driver unpacks
+into its own runs directory.  Nothing needs to be shared between the machines but
+the code: every node runs the same commit of the repository, set up with ``make
+setup`` and with ``scripts/env.sh`` sourced before ``ray start`` (a task refuses to
+run on a node whose commit differs from the driver's).
+
+Without ``--address`` the bench starts a private Ray instance on this machine with
+``--workers`` CPUs, its servers on 127.0.0.1 only, and stops it at the end.
+
+Failures: a task whose worker process dies, or whose node leaves the cluster, is
+submitted once more (Ray's own retries are off, so the bench knows and reports
+it); a second failure fails that run only.  Ctrl-C (or SIGTERM) sets a flag the
+tasks poll: the runs in flight are interrupted as the local engine interrupts them
+(their recordings and summaries come back), the tasks not yet started return
+without running.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import os
+import pathlib
+import shutil
+import signal
+import socket
+import tarfile
+import tempfile
+import time
+from typing import Any
+
+from rrtq_bringup.bench_local import GRACE_S, Job, Progress, describe, judge, row, start_run
+from rrtq_bringup.bench_table import machine
+
+__all__ = ['RayEngine', 'RayUnavailable', 'cluster_text', 'run_task']
+
+POLL_S = 0.5         # how often a task looks at its run and at the stop flag
+# Beyond GRACE_S: time for the archives of interrupted runs to reach the driver.
+SHIP_S = 30.0
+
+
+class RayUnavailable(Exception):
+    """Ray is not installed, or the cluster cannot be reached (bad input, exit 2)."""
+
+
+class _StopFlag:
+    """Set by the driver on Ctrl-C; polled by the tasks (a Ray actor)."""
+
+    def __init__(self) -> None:
+        self.value = False
+
+    def set(self) -> None:
+        self.value = True
+
+    def get(self) -> bool:
+        return self.value
+
+
+def _pack(directory: pathlib.Path) -> bytes:
+    buffer = io.BytesIO()
+    with tarfile.open(fileobj=buffer, mode='w') as tar:
+        for item in sorted(directory.iterdir()):
+            if item.name != 'scenario.yaml':   # the driver wrote it
+                tar.add(item, arcname=item.name)
+    return buffer.getvalue()
+
+
+def run_task(spec: dict[str, Any], flag: Any) -> dict[str, Any]:
+    """The body of a Ray task: one ``rrtq run`` on this node, its directory returned.
+
+    Parameters
+    ----------
+    spec : dict
+        ``name`` (the run's scenario name), ``scenario`` (its YAML text), ``commit``
+        (the driver's), ``run_timeout`` (s).
+    flag : ray.actor.ActorHandle
+        The driver's stop flag.
+
+    Returns
+    -------
+    dict
+        ``started`` (False when the bench was interrupted first), ``returncode``,
+        ``timed_out``, ``archive`` (tar bytes of the run directory), ``node``, ``pid``.
+    """
+    import ray
+
+    if ray.get(flag.get.remote()):
+        return {'started': False}
+    here = machine(pathlib.Path(__file__).resolve().parent)['commit']
+    if here != spec['commit']:
+        raise RuntimeError(f'node {socket.gethostname()} runs commit {here}, the driver '
+                           f'{spec["commit"]}: check out the same commit on every node')
+    work = pathlib.Path(tempfile.mkdtemp(prefix=f'rrtq-bench-{spec["name"]}-'))
+    try:
+        scenario = work / 'scenario.yaml'
+        scenario.write_text(spec['scenario'])
+        proc = start_run(scenario, work)
+        started = time.monotonic()
+        stopping_since: float | None = None
+        timed_out = False
+        while proc.poll() is None:
+            time.sleep(POLL_S)
+            now = time.monotonic()
+            if stopping_since is None:
+                timed_out = now - started > spec['run_timeout']
+                if timed_out or ray.get(flag.get.remote()):
+                    proc.send_signal(signal.SIGINT)
+                    stopping_since = now
+            elif now - stopping_since > GRACE_S:
+                proc.kill()
+        return {'started': True, 'returncode': proc.returncode, 'timed_out': timed_out,
+                'archive': _pack(work), 'node': socket.gethostname(), 'pid': os.getpid()}
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _connect(address: str | None, workers: int):
+    """Import Ray and join the cluster at ``address``, or start a private local one."""
+    if address is None:
+        # Read when ray is imported: the node's address becomes 127.0.0.1, so every
+        # server of the private instance listens on the loopback interface only.
+        os.environ['RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER'] = '0'
+    try:
+        import ray
+    except ImportError as exc:
+        raise RayUnavailable(f'--engine ray needs the ray package ({exc}); run make setup'
+                             ) from None
+    try:
+        if address is None:
+            ray.init(address='local', num_cpus=workers, include_dashboard=False,
+                     log_to_driver=False, logging_level=logging.WARNING)
+        else:
+            ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
+    except (ConnectionError, ValueError, RuntimeError) as exc:
+        raise RayUnavailable(f'--address {address}: cannot join the Ray cluster ({exc})'
+                             ) from None
+    return ray
+
+
+def _first_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return f'{type(exc).__name__}: {text[0] if text else ""}'.strip()
+
+
+class RayEngine:
+    """Runs the jobs as Ray tasks; the same rows as :class:`bench_local.Scheduler`."""
+
+    def __init__(self, jobs: list[Job], address: str | None, workers: int,
+                 run_timeout: float, progress: Progress) -> None:
+        self.jobs = jobs
+        self.address = address
+        self.workers = workers
+        self.run_timeout = run_timeout
+        self.progress = progress
+        self.rows: list[dict[str, Any]] = []
+        self.stop: str | None = None
+        self.ray = _connect(address, workers)
+        resources = self.ray.cluster_resources()
+        self.cluster = {'nodes': len([n for n in self.ray.nodes() if n.get('Alive')]),
+                        'cpus': resources.get('CPU', 0.0)}
+
+    def _on_signal(self, signum: int, _frame) -> None:
+        self.stop = signal.Signals(signum).name
+
+    def run(self) -> list[dict[str, Any]]:
+        ray = self.ray
+        flag = ray.remote(num_cpus=0)(_StopFlag).remote()
+        # Ray's own retries stay off: the bench retries once itself, and reports it.
+        task = ray.remote(num_cpus=1, max_retries=0)(run_task)
+        commit = machine(pathlib.Path(__file__).resolve().parent)['commit']
+        specs = {job: {'name': job.scenario.parent.name if not job.config else
+                       f'cfg{job.config:02d}-{job.scenario.parent.name}',
+                       'scenario': job.scenario.read_text(), 'commit': commit,
+                       'run_timeout': self.run_timeout} for job in self.jobs}
+        live = {task.remote(specs[job], flag): job for job in self.jobs}
+        failed_once: dict[Job, str] = {}
+        handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
+        stop_sent: float | None = None
+        try:
+            self.progress.show(0, 0, len(live))
+            while live:
+                ready, _ = ray.wait(list(live), num_returns=1, timeout=POLL_S)
+                if self.stop and stop_sent is None:
+                    flag.set.remote()
+                    stop_sent = time.monotonic()
+                for ref in ready:
+                    job = live.pop(ref)
+                    try:
+                        result = ray.get(ref)
+                    except ray.exceptions.RayError as exc:
+                        why = _first_line(exc)
+                        if job not in failed_once and not self.stop:
+                            failed_once[job] = why
+                            live[task.remote(specs[job], flag)] = job
+                            continue
+                        first = failed_once.get(job)
+                        status = (f'failed on Ray twice: {first}; then {why}' if first
+                                  else f'failed on Ray: {why}')
+                        self.rows.append(row(job, status, None, attempts=2 if first else 1,
+                                             retried_after=first))
+                    else:
+                        self.rows.append(self._collect(job, result, failed_once.get(job)))
+                    last = self.rows[-1]
+                    self.progress.finished(self.rows, len(live),
+                                           describe(job, last['status'], last['summary']))
+                if stop_sent is not None and time.monotonic() - stop_sent > GRACE_S + SHIP_S:
+                    for ref, job in live.items():
+                        ray.cancel(ref, force=True)
+                        self.rows.append(row(job, 'interrupted (no result in time)', None))
+                    live.clear()
+        finally:
+            for sig, handler in handlers.items():
+                signal.signal(sig, handler)
+            self.progress.close()
+            ray.shutdown()
+        return self.rows
+
+    def _collect(self, job: Job, result: dict[str, Any], first: str | None) -> dict[str, Any]:
+        """Unpack a finished task's run directory into ``job.out``; its row."""
+        attempts = {'attempts': 2 if first else 1, 'retried_after': first}
+        if not result['started']:
+            return row(job, 'not started (interrupted)', None, **attempts)
+        with tarfile.open(fileobj=io.BytesIO(result['archive']), mode='r') as tar:
+            tar.extractall(job.out, filter='data')
+        summary_path = job.out / 'summary.json'
+        summary = None
+        if summary_path.is_file():
+            summary = json.loads(summary_path.read_text())
+            # Where the run lives now, and where it ran.
+            summary.update({'scenario': str(job.scenario),
+                            'recording': str(job.out / 'run.mcap'),
+                            'ray_node': result['node']})
+            summary_path.write_text(json.dumps(summary, indent=2) + '\n')
+        status = judge(result['returncode'], summary, result['timed_out'], self.run_timeout,
+                       job.out / 'bench.log')
+        return row(job, status, summary, node=result['node'], **attempts)
+
+
+def cluster_text(engine: RayEngine) -> str:
+    """'ray (private, 2 CPUs)' or 'ray (ADDR: 3 nodes, 24 CPUs)'."""
+    where = 'private instance on 127.0.0.1' if engine.address is None else engine.address
+    return (f"ray ({where}: {engine.cluster['nodes']} node(s), "
+            f"{engine.cluster['cpus']:g} CPUs)")
+
