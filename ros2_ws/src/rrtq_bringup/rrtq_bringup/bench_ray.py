@@ -79,8 +79,8 @@ def run_task(spec: dict[str, Any], flag: Any) -> dict[str, Any]:
     Parameters
     ----------
     spec : dict
-        ``name`` (the run's scenario name), ``scenario`` (its YAML text), ``commit``
-        (the driver's), ``run_timeout`` (s).
+        ``bench`` (the driver's id), ``name`` (the run's), ``scenario`` (its YAML
+        text), ``commit`` (the driver's), ``run_timeout`` (s).
     flag : ray.actor.ActorHandle
         The driver's stop flag.
 
@@ -98,7 +98,11 @@ def run_task(spec: dict[str, Any], flag: Any) -> dict[str, Any]:
     if here != spec['commit']:
         raise RuntimeError(f'node {socket.gethostname()} runs commit {here}, the driver '
                            f'{spec["commit"]}: check out the same commit on every node')
-    work = pathlib.Path(tempfile.mkdtemp(prefix=f'rrtq-bench-{spec["name"]}-'))
+    # One directory per bench and run: a retry on the same node clears what the
+    # attempt whose worker died left behind.
+    work = pathlib.Path(tempfile.gettempdir(), 'rrtq-bench', f'{spec["bench"]}-{spec["name"]}')
+    shutil.rmtree(work, ignore_errors=True)
+    work.mkdir(parents=True)
     try:
         scenario = work / 'scenario.yaml'
         scenario.write_text(spec['scenario'])
@@ -122,12 +126,26 @@ def run_task(spec: dict[str, Any], flag: Any) -> dict[str, Any]:
         shutil.rmtree(work, ignore_errors=True)
 
 
+def _token_available() -> bool:
+    """Whether this user has a Ray cluster token where Ray looks for one."""
+    path = os.environ.get('RAY_AUTH_TOKEN_PATH')
+    return ('RAY_AUTH_TOKEN' in os.environ or (path is not None and os.path.isfile(path))
+            or (pathlib.Path.home() / '.ray' / 'auth_token').is_file())
+
+
 def _connect(address: str | None, workers: int):
     """Import Ray and join the cluster at ``address``, or start a private local one."""
-    if address is None:
-        # Read when ray is imported: the node's address becomes 127.0.0.1, so every
-        # server of the private instance listens on the loopback interface only.
+    host = (address or '127.0.0.1').rsplit(':', 1)[0]
+    if host in ('127.0.0.1', 'localhost', '::1', '[::1]'):
+        # Read when ray is imported.  Ray otherwise swaps a loopback address for the
+        # machine's network address; with it the node's address is 127.0.0.1, so the
+        # servers of a private instance listen on the loopback interface only and a
+        # driver finds a head that was started that way.
         os.environ['RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER'] = '0'
+    if address is not None and 'RAY_AUTH_MODE' not in os.environ and _token_available():
+        # Ray turns token authentication on by itself only for address 'auto'; a head
+        # started with it on (Ray's default) refuses a driver that joins without it.
+        os.environ['RAY_AUTH_MODE'] = 'token'
     try:
         import ray
     except ImportError as exc:
@@ -176,7 +194,8 @@ class RayEngine:
         # Ray's own retries stay off: the bench retries once itself, and reports it.
         task = ray.remote(num_cpus=1, max_retries=0)(run_task)
         commit = machine(pathlib.Path(__file__).resolve().parent)['commit']
-        specs = {job: {'name': job.scenario.parent.name if not job.config else
+        bench = f'{socket.gethostname()}-{os.getpid()}-{int(time.time())}'
+        specs = {job: {'bench': bench, 'name': job.scenario.parent.name if not job.config else
                        f'cfg{job.config:02d}-{job.scenario.parent.name}',
                        'scenario': job.scenario.read_text(), 'commit': commit,
                        'run_timeout': self.run_timeout} for job in self.jobs}
