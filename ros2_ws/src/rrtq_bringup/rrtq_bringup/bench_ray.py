@@ -16,10 +16,11 @@ Without ``--address`` the bench starts a private Ray instance on this machine wi
 
 Failures: a task whose worker process dies, or whose node leaves the cluster, is
 submitted once more (Ray's own retries are off, so the bench knows and reports
-it); a second failure fails that run only.  Ctrl-C (or SIGTERM) sets a flag the
-tasks poll: the runs in flight are interrupted as the local engine interrupts them
-(their recordings and summaries come back), the tasks not yet started return
-without running.
+it); a second failure fails that run only.  Ctrl-C (or SIGTERM) cancels every task:
+a queued one never starts; a running one's worker is ended and Ray ends the
+worker's ``rrtq run`` with it, leaving on that node, under ``/tmp/rrtq-bench/``, a
+recording readable up to its last chunk and no summary.  The table lists them as
+interrupted; nothing of the bench keeps running.
 """
 
 from __future__ import annotations
@@ -42,26 +43,11 @@ from rrtq_bringup.bench_table import machine
 
 __all__ = ['RayEngine', 'RayUnavailable', 'cluster_text', 'run_task']
 
-POLL_S = 0.5         # how often a task looks at its run and at the stop flag
-# Beyond GRACE_S: time for the archives of interrupted runs to reach the driver.
-SHIP_S = 30.0
+POLL_S = 0.5         # how often a task looks at its run, the driver at its tasks
 
 
 class RayUnavailable(Exception):
     """Ray is not installed, or the cluster cannot be reached (bad input, exit 2)."""
-
-
-class _StopFlag:
-    """Set by the driver on Ctrl-C; polled by the tasks (a Ray actor)."""
-
-    def __init__(self) -> None:
-        self.value = False
-
-    def set(self) -> None:
-        self.value = True
-
-    def get(self) -> bool:
-        return self.value
 
 
 def _pack(directory: pathlib.Path) -> bytes:
@@ -73,7 +59,7 @@ def _pack(directory: pathlib.Path) -> bytes:
     return buffer.getvalue()
 
 
-def run_task(spec: dict[str, Any], flag: Any) -> dict[str, Any]:
+def run_task(spec: dict[str, Any]) -> dict[str, Any]:
     """The body of a Ray task: one ``rrtq run`` on this node, its directory returned.
 
     Parameters
@@ -81,19 +67,18 @@ def run_task(spec: dict[str, Any], flag: Any) -> dict[str, Any]:
     spec : dict
         ``bench`` (the driver's id), ``name`` (the run's), ``scenario`` (its YAML
         text), ``commit`` (the driver's), ``run_timeout`` (s).
-    flag : ray.actor.ActorHandle
-        The driver's stop flag.
 
     Returns
     -------
     dict
-        ``started`` (False when the bench was interrupted first), ``returncode``,
-        ``timed_out``, ``archive`` (tar bytes of the run directory), ``node``, ``pid``.
-    """
-    import ray
+        ``returncode``, ``timed_out``, ``archive`` (tar bytes of the run directory),
+        ``node``, ``pid``.
 
-    if ray.get(flag.get.remote()):
-        return {'started': False}
+    Notes
+    -----
+    The task makes no Ray call while it runs: a task blocked in ``ray.get`` lends
+    its CPU to the next queued task, which would put two runs on one core.
+    """
     here = machine(pathlib.Path(__file__).resolve().parent)['commit']
     if here != spec['commit']:
         raise RuntimeError(f'node {socket.gethostname()} runs commit {here}, the driver '
@@ -108,19 +93,16 @@ def run_task(spec: dict[str, Any], flag: Any) -> dict[str, Any]:
         scenario.write_text(spec['scenario'])
         proc = start_run(scenario, work)
         started = time.monotonic()
-        stopping_since: float | None = None
         timed_out = False
         while proc.poll() is None:
             time.sleep(POLL_S)
-            now = time.monotonic()
-            if stopping_since is None:
-                timed_out = now - started > spec['run_timeout']
-                if timed_out or ray.get(flag.get.remote()):
-                    proc.send_signal(signal.SIGINT)
-                    stopping_since = now
-            elif now - stopping_since > GRACE_S:
+            elapsed = time.monotonic() - started
+            if not timed_out and elapsed > spec['run_timeout']:
+                timed_out = True
+                proc.send_signal(signal.SIGINT)
+            elif timed_out and elapsed > spec['run_timeout'] + GRACE_S:
                 proc.kill()
-        return {'started': True, 'returncode': proc.returncode, 'timed_out': timed_out,
+        return {'returncode': proc.returncode, 'timed_out': timed_out,
                 'archive': _pack(work), 'node': socket.gethostname(), 'pid': os.getpid()}
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -190,7 +172,6 @@ class RayEngine:
 
     def run(self) -> list[dict[str, Any]]:
         ray = self.ray
-        flag = ray.remote(num_cpus=0)(_StopFlag).remote()
         # Ray's own retries stay off: the bench retries once itself, and reports it.
         task = ray.remote(num_cpus=1, max_retries=0)(run_task)
         commit = machine(pathlib.Path(__file__).resolve().parent)['commit']
@@ -199,42 +180,36 @@ class RayEngine:
                        f'cfg{job.config:02d}-{job.scenario.parent.name}',
                        'scenario': job.scenario.read_text(), 'commit': commit,
                        'run_timeout': self.run_timeout} for job in self.jobs}
-        live = {task.remote(specs[job], flag): job for job in self.jobs}
+        live = {task.remote(specs[job]): job for job in self.jobs}
         failed_once: dict[Job, str] = {}
         handlers = {s: signal.signal(s, self._on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
-        stop_sent: float | None = None
         try:
             self.progress.show(0, 0, len(live))
-            while live:
+            while live and not self.stop:
                 ready, _ = ray.wait(list(live), num_returns=1, timeout=POLL_S)
-                if self.stop and stop_sent is None:
-                    flag.set.remote()
-                    stop_sent = time.monotonic()
                 for ref in ready:
                     job = live.pop(ref)
                     try:
                         result = ray.get(ref)
                     except ray.exceptions.RayError as exc:
                         why = _first_line(exc)
-                        if job not in failed_once and not self.stop:
+                        if job not in failed_once:
                             failed_once[job] = why
-                            live[task.remote(specs[job], flag)] = job
+                            live[task.remote(specs[job])] = job
                             continue
-                        first = failed_once.get(job)
-                        status = (f'failed on Ray twice: {first}; then {why}' if first
-                                  else f'failed on Ray: {why}')
-                        self.rows.append(row(job, status, None, attempts=2 if first else 1,
-                                             retried_after=first))
+                        self.rows.append(row(job, f'failed on Ray twice: {failed_once[job]}; '
+                                             f'then {why}', None, attempts=2,
+                                             retried_after=failed_once[job]))
                     else:
                         self.rows.append(self._collect(job, result, failed_once.get(job)))
                     last = self.rows[-1]
                     self.progress.finished(self.rows, len(live),
                                            describe(job, last['status'], last['summary']))
-                if stop_sent is not None and time.monotonic() - stop_sent > GRACE_S + SHIP_S:
-                    for ref, job in live.items():
-                        ray.cancel(ref, force=True)
-                        self.rows.append(row(job, 'interrupted (no result in time)', None))
-                    live.clear()
+            for ref, job in live.items():
+                ray.cancel(ref, force=True)
+                self.rows.append(row(job, 'interrupted (task cancelled; a run that had started '
+                                     'left its recording on its node, /tmp/rrtq-bench/)',
+                                     None))
         finally:
             for sig, handler in handlers.items():
                 signal.signal(sig, handler)
@@ -245,8 +220,6 @@ class RayEngine:
     def _collect(self, job: Job, result: dict[str, Any], first: str | None) -> dict[str, Any]:
         """Unpack a finished task's run directory into ``job.out``; its row."""
         attempts = {'attempts': 2 if first else 1, 'retried_after': first}
-        if not result['started']:
-            return row(job, 'not started (interrupted)', None, **attempts)
         with tarfile.open(fileobj=io.BytesIO(result['archive']), mode='r') as tar:
             tar.extractall(job.out, filter='data')
         summary_path = job.out / 'summary.json'
