@@ -166,8 +166,9 @@ class ObstacleMap:
     prepared union of the closed polygons (``intersects`` counts touching, as
     the tests above do): on rand_Static grown by 0.5 m (35 polygons, 1,560
     edges) a point costs ~5 us and a batch of 25 segments ~40 us, against
-    ~70 us and ~150 us for the numpy edge tests with bounding-box culling
-    (``benchmarks/planner_vs_ompl.py`` measures both).  The union is rebuilt
+    ~70 us and ~150 us for the numpy edge tests with bounding-box culling that
+    this class ran before (measured side by side, 2026-12-01;
+    ``benchmarks/planner_vs_ompl.py`` reports the GEOS calls).  The union is rebuilt
     lazily, at the first query after a change, so a batch of obstacle
     updates pays for one.
     """
