@@ -126,6 +126,7 @@ def _cell(text: str) -> str:
 def markdown(table: dict[str, Any]) -> str:
     """The table as Markdown: a header line (machine, command), the metrics, the failures."""
     info, s = table['machine'], table['stats']
+    engine = table.get('engine', f"local, {table['workers']} workers")
     ci = s['success_rate_ci95']
     ci_text = f' (95 % CI {_pct(ci[0])}–{_pct(ci[1])})' if ci else ''
     rows = [
@@ -144,7 +145,7 @@ def markdown(table: dict[str, Any]) -> str:
         ('controller step, ms (median of medians / p95 of p95s)',
          f"{_num(s['controller_step_ms']['median'])} / {_num(s['controller_step_ms']['p95'])}"),
         ('sim speed-up, sim s per wall s (median)', _num(s['sim_speedup']['median'], 2)),
-        ('wall time', f"{_num(table['wall_s'] / 60.0, 1)} min with {table['workers']} workers "
+        ('wall time', f"{_num(table['wall_s'] / 60.0, 1)} min, engine {engine} "
                       f"(median run {_num(s['run_wall_s']['median'], 0)} s)"),
     ]
     lines = [f"_{info['date']}, {info['cpu']} ({info['cores']} cores), Python {info['python']}, "
@@ -163,4 +164,9 @@ def markdown(table: dict[str, Any]) -> str:
     if s['incomplete']:
         lines += ['', 'Runs that did not complete:', '', '| seed | reason |', '|---|---|']
         lines += [f"| {f['seed']} | {_cell(f['reason'])} |" for f in s['incomplete']]
+    retried = [r for r in table['runs'] if r.get('retried_after')]
+    if retried:
+        lines += ['', 'Runs retried once after a failure on the engine:', '',
+                  '| seed | first attempt |', '|---|---|']
+        lines += [f"| {r['seed']} | {_cell(r['retried_after'])} |" for r in retried]
     return '\n'.join(lines) + '\n'

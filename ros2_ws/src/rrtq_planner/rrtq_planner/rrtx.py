@@ -53,6 +53,10 @@ _BATCH = 512
 # r(n) shrinks at every insertion; culling a node's list for each slight
 # shrink would cost more per pop than the few extra neighbours it removes.
 _CULL_SLACK = 1.05
+# path_bias: a bend's weight is its turning angle (rad) plus this floor, so a
+# straight stretch still gets samples; the samples spread this many r(n) about it.
+_BEND_FLOOR = 1e-3
+_BEND_SPREAD = 0.5
 
 
 class RRTX(ObstacleMixin, RobotMixin):
@@ -101,6 +105,10 @@ class RRTX(ObstacleMixin, RobotMixin):
         self._next = 0
         self.radius = config.ball_radius(1)
         self.iterations = 0
+        self._bias_cost = INF       # the path that path_bias samples about, when cached
+        self._bias_path = np.zeros((0, 2))
+        self._bias_length = 0.0
+        self._bias_cdf = np.ones(1)
         self._init_robot()
 
     # ------------------------------------------------------------ sampling
@@ -138,7 +146,12 @@ class RRTX(ObstacleMixin, RobotMixin):
         is_robot = (
             self.vbot < 0 and robot is not None and row[2] < cfg.robot_sample_probability
         )
-        point = robot if is_robot and robot is not None else self._lo + self._span * row[:2]
+        if is_robot and robot is not None:
+            point = robot
+        elif self.vbot >= 0 and row[2] < cfg.path_bias and self._path_length() > 0.0:
+            point = self._sample_about_path()
+        else:
+            point = self._lo + self._span * row[:2]
         nearest, dist, near = self.index.nearest_and_near(point, self.radius)
         if dist == 0.0:
             if is_robot:
@@ -164,6 +177,35 @@ class RRTX(ObstacleMixin, RobotMixin):
             self._attach_robot(v)
         self.reduce_inconsistency()
         return v
+
+    def _path_length(self) -> float:
+        """Length (m) of the current path; caches it and its bend weights."""
+        cost = self.cost()
+        if cost != self._bias_cost:
+            self._bias_cost = cost
+            path = self.path()
+            self._bias_path = path
+            self._bias_length = 0.0
+            if path.shape[0] >= 2:
+                seg = np.diff(path, axis=0)
+                self._bias_length = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+                heading = np.arctan2(seg[:, 1], seg[:, 0])
+                turn = np.abs((np.diff(heading) + np.pi) % (2.0 * np.pi) - np.pi)
+                weight = turn + _BEND_FLOOR
+                self._bias_cdf = np.cumsum(weight) / weight.sum()
+        return self._bias_length
+
+    def _sample_about_path(self) -> np.ndarray:
+        """A sample about a bend of the current path (``path_bias``, see RRTXConfig)."""
+        path = self._bias_path
+        u, dx, dy = self._rng.random(), self._rng.normal(), self._rng.normal()
+        if path.shape[0] < 3:
+            centre = path[0] + u * (path[-1] - path[0])
+        else:
+            k = min(int(np.searchsorted(self._bias_cdf, u)), self._bias_cdf.shape[0] - 1)
+            centre = path[k + 1]
+        point = centre + _BEND_SPREAD * self.radius * np.array((dx, dy))
+        return np.clip(point, self._lo, self._lo + self._span)
 
     # ------------------------------------------------------- tree building
     def extend(self, point: np.ndarray, near: np.ndarray) -> int | None:

@@ -30,8 +30,9 @@ def box(cx, cy, hx, hy):
     )
 
 
-def build(seed=0, eps=0.0, iterations=1200, obstacles=STATIC, delta=3.0):
-    cfg = RRTXConfig(goal=GOAL, bounds=BOUNDS, steer_distance=delta, epsilon=eps)
+def build(seed=0, eps=0.0, iterations=1200, obstacles=STATIC, delta=3.0, path_bias=0.0):
+    cfg = RRTXConfig(goal=GOAL, bounds=BOUNDS, steer_distance=delta, epsilon=eps,
+                     path_bias=path_bias)
     planner = RRTX(cfg, np.random.default_rng(seed))
     for oid, poly in obstacles.items():
         planner.add_obstacle(oid, poly)
@@ -169,9 +170,9 @@ def test_invariants_hold_while_growing_and_repairing():
     assert_matches_dijkstra(planner)
 
 
-@pytest.mark.parametrize("eps", [0.0, 0.5])
-def test_cost_equals_dijkstra_through_obstacle_changes(eps):
-    planner = build(seed=2, eps=eps)
+@pytest.mark.parametrize("eps, path_bias", [(0.0, 0.0), (0.5, 0.0), (0.0, 0.3)])
+def test_cost_equals_dijkstra_through_obstacle_changes(eps, path_bias):
+    planner = build(seed=2, eps=eps, path_bias=path_bias)
     assert_matches_dijkstra(planner)
     path = planner.path()
     mid = path[len(path) // 2]
@@ -435,3 +436,33 @@ def test_goal_enclosed_from_the_start_keeps_searching_without_hanging():
     assert planner.status is PlanStatus.FOUND
     assert_matches_dijkstra(planner)
     assert_path_clear(planner.path(), [ring["n"], ring["e"], ring["w"]])
+
+
+def _share_near_bends(planner, before):
+    """Share of the nodes added since ``before`` within r(n) of a bend of the path."""
+    path = planner.path()
+    seg = np.diff(path, axis=0)
+    heading = np.arctan2(seg[:, 1], seg[:, 0])
+    turn = np.abs((np.diff(heading) + np.pi) % (2 * np.pi) - np.pi)
+    bends = path[1:-1][turn > 0.1]
+    added = planner.positions[before:]
+    dist = np.min(np.linalg.norm(added[:, None, :] - bends[None], axis=2), axis=1)
+    return float(np.mean(dist < planner.radius))
+
+
+def test_path_bias_samples_about_the_paths_bends_and_widens_the_ball():
+    uniform = RRTXConfig(goal=GOAL, bounds=BOUNDS)
+    biased = RRTXConfig(goal=GOAL, bounds=BOUNDS, path_bias=0.3)
+    assert biased.ball_radius(5000) == pytest.approx(uniform.ball_radius(5000) / 0.7 ** 0.5)
+    with pytest.raises(ValueError):
+        RRTXConfig(goal=GOAL, bounds=BOUNDS, path_bias=1.0)
+    shares = {}
+    for bias in (0.0, 0.3):
+        planner = build(seed=4, path_bias=bias, iterations=400)
+        before = planner.node_count
+        planner.run(600)
+        shares[bias] = _share_near_bends(planner, before)
+        assert_matches_dijkstra(planner)
+    # Against the same planner with uniform samples (some biased samples are
+    # steered, fall in obstacles or settle on other bends): clearly more at bends.
+    assert shares[0.3] > 1.3 * shares[0.0], shares
