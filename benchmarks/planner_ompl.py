@@ -107,8 +107,10 @@ class OmplQuery:
 
     def simplified_cost(self, pdef: ob.ProblemDefinition,
                         budget_s: float) -> tuple[float, float]:
-        """Length of a copy of the solution after ``PathSimplifier.simplify`` with a
-        time limit of ``budget_s`` seconds, and the time it took (s).
+        """Length of the simplified solution and the time simplifying took (s).
+
+        A copy of the solution goes through ``PathSimplifier.simplify`` with a time limit
+        of ``budget_s`` seconds.
 
         Like RRT^X's post-processing, which always shortens the tree path, it makes
         at least one pass even past the limit (``atLeastOnce``).
