@@ -30,7 +30,8 @@ def curvature_ok(points, dt, a_max):
     a = np.linalg.norm(points[1:-1] - points[:-2], axis=1)
     b = np.linalg.norm(points[2:] - points[1:-1], axis=1)
     c = np.linalg.norm(points[2:] - points[:-2], axis=1)
-    cross = np.abs(np.cross(points[1:-1] - points[:-2], points[2:] - points[1:-1]))
+    u, w = points[1:-1] - points[:-2], points[2:] - points[1:-1]
+    cross = np.abs(u[:, 0] * w[:, 1] - u[:, 1] * w[:, 0])
     with np.errstate(divide='ignore', invalid='ignore'):
         kappa = np.where(a * b * c > 0, 2.0 * cross / (a * b * c), 0.0)
     v = c / (2.0 * dt)

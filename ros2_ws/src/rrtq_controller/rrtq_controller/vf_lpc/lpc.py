@@ -56,6 +56,9 @@ def box_qp(H: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, x0: np.
     Each iteration fixes the variables at a bound whose gradient pushes outward, takes the
     Newton step on the others and projects, with backtracking on the objective.
     """
+    x = -np.linalg.solve(H, g)
+    if np.all(x >= lo) and np.all(x <= hi):
+        return x                       # the box is not active: the Newton point itself
     x = np.clip(x0, lo, hi)
 
     def f(v: np.ndarray) -> float:
@@ -114,12 +117,13 @@ class RecedingHorizonActorCritic:
         self._weights = np.concatenate((np.broadcast_to(self.Q, (N - 1, n, n)),
                                         self.P[None]))          # stages 1..N
         self._us: np.ndarray | None = None
+        self._xs: np.ndarray | None = None
         self._edges: EdgeSet | None = None
         self._edge_polys: list[np.ndarray] = []
 
     def reset(self) -> None:
         """Forget the warm start."""
-        self._us = None
+        self._us = self._xs = None
 
     def _condense(self, x0, fbar, A, B, xbar, ubar):
         """Phi x0 + s and Gamma of X = (x_1..x_N) for the model linearised at (xbar, ubar)."""
@@ -163,12 +167,11 @@ class RecedingHorizonActorCritic:
             self._edges, self._edge_polys = EdgeSet(obstacles), list(obstacles)
         edges = self._edges
         N, n, m = cfg.horizon_steps, self.n, self.m
-        us = np.zeros((N, m)) if self._us is None else np.vstack((self._us[1:], self._us[-1:]))
-        xbar = np.empty((N, n))
-        xbar[0] = x0
-        fbar, A, B = linearise(np.repeat(x0[None], N, axis=0), us)
-        for k in range(1, N):            # a consistent first nominal: the warm start played
-            xbar[k] = fbar[k - 1] + A[k - 1] @ (xbar[k - 1] - x0)
+        if self._us is None:
+            us, xbar = np.zeros((N, m)), np.repeat(x0[None], N, axis=0)
+        else:                            # the last solution, one stage on
+            us = np.vstack((self._us[1:], self._us[-1:]))
+            xbar = np.vstack((x0[None], self._xs[1:], self._xs[-1:]))[:N]
         fbar, A, B = linearise(xbar, us)
         free, gam = self._condense(x0, fbar, A, B, xbar, us)
         U = us.reshape(-1)
@@ -204,5 +207,5 @@ class RecedingHorizonActorCritic:
                 if c_cost < cost:
                     U, us, xs, cost, bar = cand, cand_u, cand_x, c_cost, c_bar
                     break
-        self._us = us
+        self._us, self._xs = us, xs
         return HorizonSolution(np.vstack((x0[None], xs)), us.copy(), cost, done)
