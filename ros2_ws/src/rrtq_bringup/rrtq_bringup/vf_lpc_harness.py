@@ -10,7 +10,7 @@ model, its own observations and the augmented obstacles.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
@@ -88,7 +88,6 @@ class HarnessResult:
     learned_std: np.ndarray               # (K, n) its predictive std (latent)
     step_ms: np.ndarray
     path: np.ndarray
-    reference_lateral: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 def plan_path(obstacles: Sequence[np.ndarray], start: np.ndarray, goal: np.ndarray,

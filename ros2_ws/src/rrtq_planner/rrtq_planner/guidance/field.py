@@ -13,16 +13,17 @@ polygon, reactive boundary ``R_i = {d_i = w_r}`` and repulsive boundary
   and inside Q), ``f_in = exp(-l/(1-sigma))`` (0 on and outside R); weights
   ``b_Pi = f_out/(f_out+f_in)`` and ``b_Ri = 1 - b_Pi``;
 - eq. (1): ``chi = prod_i b_Pi chi_P^ + sum_i b_Ri chi_Ri^`` (hats: unit vectors);
-- eq. (13): virtual obstacles ``j`` add ``g_j b_Vj chi_Vj^`` and multiply the path weight
-  by ``1 - g_j b_Vj``; ``chi_Vj`` converges to the virtual repulsive circle (radius
-  ``r_min = v_d²/a_max``) so a curve captured by it turns with curvature ``1/r_min``;
+- eq. (13): a virtual obstacle j (a disc of radius ``r_min = v_d²/a_max`` tangent to the
+  path before an occluding obstacle, its parent) has ``chi_Vj``, which converges to its
+  circle, so a curve it captures turns with curvature ``1/r_min``;
 - eq. (16): ``g_j = 1 - exp(-k_v (d_i - w_r))`` outside the parent's reactive boundary,
-  0 inside it: within the virtual region the curve follows ``g_j chi_Vj^ + (1 - g_j)
-  chi_Ri^``, so the virtual field hands over to the real one, which outside ``R_i`` draws
-  the curve onto ``R_i``. A virtual obstacle acts from the path's tangent point on; once
-  ``g_j <= 0.2`` the parent's weight is held at ``1 - g_j`` (1 inside ``R_i``) (the curve goes round ``R_i``) until the
-  path field no longer points into the parent, where ``chi_P`` is tangent to ``R_i``; then
-  it is switched off for good (Remark 3: it never draws the curve back).
+  0 inside. In the virtual region the curve follows ``g_j chi_Vj^ + (1 - g_j) chi_Ri^``
+  with weight ``b_Vj = max(bump(gap/w_r), 1 - g_j)`` (the path weight times
+  ``1 - b_Vj``): the virtual field hands the curve to the parent's field, which outside
+  ``R_i`` draws it onto ``R_i``, and near ``R_i`` the weight stays up so the path field
+  cannot take the turn back. A virtual obstacle acts from the path's tangent point on;
+  once the curve is near ``R_i`` (``g_j <= 0.2``) it is switched off for good (Remark 3)
+  where the path field stops pointing into the parent, i.e. is tangent to the level set.
 """
 
 from __future__ import annotations
@@ -136,8 +137,8 @@ class CompositeField:
     def vector(self, xi: np.ndarray, state: RolloutState) -> tuple[np.ndarray, PathQuery]:
         """The composite vector chi(xi) (not normalised) and the path query.
 
-        Sets ``state.circulation`` for obstacles met for the first time and releases
-        virtual obstacles whose parent's reactive region has been entered (Remark 3).
+        Sets ``state.circulation`` for obstacles met for the first time, and hands over
+        and releases virtual obstacles (Remark 3).
         """
         cfg = self.config
         chi_p, q = self.path_vector(xi, state)
