@@ -45,6 +45,8 @@ def _parser() -> argparse.ArgumentParser:
                    "'rrtq plan --help' for its options", add_help=False)
     sub.add_parser('bench', help='Monte Carlo over seeds and random obstacle layouts; '
                    "'rrtq bench --help' for its options", add_help=False)
+    sub.add_parser('identify', help='fit the Koopman model of the plant from a recording; '
+                   "'rrtq identify --help' for its options", add_help=False)
     rep = sub.add_parser('report', help='figures and summary from a recording alone')
     rep.add_argument('recording', type=pathlib.Path, help='run.mcap of a run')
     rep.add_argument('--out', type=pathlib.Path,
@@ -110,6 +112,9 @@ def main(argv: list[str] | None = None) -> int:
     if argv[:1] == ['bench']:
         from rrtq_bringup.bench import main as bench_main
         return bench_main(argv[1:])
+    if argv[:1] == ['identify']:
+        from rrtq_bringup.identify import main as identify_main
+        return identify_main(argv[1:])
     args = _parser().parse_args(argv)
     return {'run': cmd_run, 'report': cmd_report}[args.command](args)
 
