@@ -2,9 +2,10 @@
 """The guiding level on the Otte and forest environments: curvature bound and deadlocks.
 
 For M. Otte's ``rand_Static`` (3 planner seeds) and the 100 x 100 m forests of
-``scenarios/envs/make_forest.py`` (seeds 1, 2; 300 trees), an RRT^X path is planned on the
-obstacles grown by the robot radius (0.5 m), the composite field's curve is rolled out
-from the start to the goal, and the reference sampled every 0.05 s. Reported: how the
+:mod:`rrtq_bringup.forest` (seeds 1, 2; 300 trees, as ``scenarios/envs/make_forest.py``
+writes them), an RRT^X path is planned on the obstacles grown by the robot radius (0.5 m),
+the composite field's curve is rolled out from the start to the goal, and the reference
+sampled every 0.05 s. Reported: how the
 rollout ended (reached / stalled), the share of reference samples with v² kappa <= a_max
 (curvature from the samples' circumradius, speed from central differences), the largest
 v² kappa / a_max, the time to the goal against the path length at v_max, and the smallest
@@ -15,49 +16,44 @@ clearance to the grown obstacles. Usage::
 
 from __future__ import annotations
 
-import importlib.util
 import sys
 
 import numpy as np
 import yaml
 
-from common import ROOT, save
+from common import save
 
-from rrtq_planner import plan_cli
+from rrtq_bringup.forest import forest_yaml
+from rrtq_common.geometry import polygon_from_circle
+from rrtq_common.polygon_set import PolygonSet
+from rrtq_planner import routes
 from rrtq_planner.guidance import (CurveStatus, GuidanceConfig, GuidanceTrack, sample_in_time,
                                    speed_profile)
 from rrtq_planner.shortcut import Shortener
-from rrtq_sim.obstacles import polygon_from_circle
-from rrtq_sim.polygon_set import PolygonSet
+from rrtq_testing.paths import OTTE, read_otte
 
 RADIUS = 0.5
 CFG = GuidanceConfig(mode='gvf')
 
 
 def forest(seed: int):
-    spec = importlib.util.spec_from_file_location('make_forest',
-                                                  ROOT / 'scenarios/envs/make_forest.py')
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    sc = yaml.safe_load(mod.forest_yaml(seed))
+    sc = yaml.safe_load(forest_yaml(seed))
     trees = [polygon_from_circle(o['circle']['center'], o['circle']['radius'], 16)
              for o in sc['obstacles']]
     return trees, np.array(sc['start'], float), np.array(sc['goal'], float), (0, 100, 0, 100)
 
 
 def otte():
-    env = plan_cli.load_environment(str(ROOT / 'ros2_ws/src/rrtq_sim/test/data/otte/'
-                                              'rand_Static.txt'))
+    polygons = read_otte(OTTE / 'rand_Static.txt')
     start, goal = np.array([35.0, -40.0]), np.array([-40.0, 40.0])
-    return list(env.polygons), start, goal, plan_cli.default_bounds(env.polygons, start, goal,
-                                                                    RADIUS)
+    return polygons, start, goal, routes.default_bounds(polygons, start, goal, RADIUS)
 
 
 def evaluate(name, polys, start, goal, bounds, seed, iterations):
-    grown = plan_cli.grow(polys, RADIUS)
-    planner = plan_cli.make_planner(grown, start, goal, bounds, RADIUS, seed)
+    grown = routes.grow(polys, RADIUS)
+    planner = routes.make_planner(grown, start, goal, bounds, RADIUS, seed)
     planner.run(iterations)
-    path = plan_cli.shortest_route(planner, start, Shortener(grown))
+    path = routes.shortest_route(planner, start, Shortener(grown))
     track = GuidanceTrack(path, grown, CFG)
     curve = track.roll(start)
     speeds = speed_profile(curve.points, CFG, 0.0, curve.status is CurveStatus.REACHED)
@@ -75,7 +71,7 @@ def evaluate(name, polys, start, goal, bounds, seed, iterations):
     lat = v[moving] ** 2 * kappa[moving]
     arrive = ref.t[np.flatnonzero(np.hypot(*ref.velocities.T) > 0)[-1] + 1]
     referee = PolygonSet(grown)
-    length = plan_cli.path_length(path)
+    length = routes.path_length(path)
     return {'environment': name, 'seed': seed, 'status': str(curve.status),
             'virtual_obstacles': len(track.field.virtual), 'path_m': round(length, 2),
             'samples': int(moving.sum()), 'share_within': float(np.mean(lat <= CFG.a_max)),

@@ -27,7 +27,7 @@ from common import RESULTS, save  # noqa: E402
 from rrtq_bringup.vf_lpc_harness import (Bump, identify_by_probing, rover_plant,  # noqa: E402
                                          run_closed_loop)
 from rrtq_controller.vf_lpc import LPCConfig  # noqa: E402
-from rrtq_sim.obstacles import polygon_from_circle  # noqa: E402
+from rrtq_common.geometry import polygon_from_circle  # noqa: E402
 
 OBSTACLES = [polygon_from_circle((8.0, 1.0), 1.5, 16),
              np.array([[12.0, -6.0], [14.0, -6.0], [14.0, 3.0], [12.0, 3.0]]),
@@ -68,7 +68,8 @@ def main() -> int:
             rows.append({'mass_kg': mass, 'gp': comp, **metrics(r)})
             print(rows[-1], flush=True)
     table = ['| plant | GP | goal | collided | time s '
-             '| one-step vel. error nominal / learned (m/s) | reduction | 2σ coverage | one-step pos. error nominal / learned (mm) '
+             '| one-step vel. error nominal / learned (m/s) | reduction | 2σ coverage '
+             '| one-step pos. error nominal / learned (mm) '
              '| tracking mean / max (m) | min clearance (m) | max |u| (N) |',
              '|---|---|---|---|---|---|---|---|---|---|---|---|']
     for x in rows:

@@ -15,6 +15,7 @@ Exit codes: 0 model written; 2 bad input (missing or unreadable file, no ``/odom
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import pathlib
@@ -27,12 +28,15 @@ from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
+from rrtq_bringup.run_data import embedded_scenario
 from rrtq_controller.vf_lpc.koopman import LIFTINGS, fit_edmd, prediction_errors
+from rrtq_sim.plant import PlantConfig
 
 EXIT_BAD_INPUT = 2
 # Fewer triples than this per fitted parameter row cannot pin the model down.
 MIN_SAMPLES = 50
 OPEN_LOOP_S = 2.0
+PLANT_FORCE_LIMIT = next(f.default for f in dataclasses.fields(PlantConfig) if f.name == 'force_limit')
 
 
 class BadInput(Exception):
@@ -66,15 +70,11 @@ def read_triples(path: pathlib.Path) -> tuple[np.ndarray, np.ndarray, np.ndarray
                     odom[_ns(msg.header)] = [p.x, p.y, v.x, v.y]
                 else:
                     cmd[_ns(msg.header)] = [msg.wrench.force.x, msg.wrench.force.y]
-        with open(path, 'rb') as f:
-            for record in make_reader(f).iter_metadata():
-                if record.name == 'rrtq_scenario':
-                    scenario = yaml.safe_load(record.metadata['yaml']) or {}
-                    for section in ('controller', 'plant'):
-                        value = (scenario.get(section) or {}).get('force_limit')
-                        if value is not None:
-                            limit = float(value)
-                            break
+        scenario = embedded_scenario(path)
+        if scenario:        # what the plant applied: the scenario's limit, or its default
+            plant_limit = (scenario.get('plant') or {}).get('force_limit', PLANT_FORCE_LIMIT)
+            value = (scenario.get('controller') or {}).get('force_limit', plant_limit)
+            limit = float(value)
     except (McapError, OSError, ValueError, KeyError, yaml.YAMLError) as exc:
         raise BadInput(f'{path}: not a readable recording ({exc})') from None
     for topic, data in (('/odom', odom), ('/cmd_force', cmd)):

@@ -16,11 +16,11 @@ import numpy as np
 import numpy.typing as npt
 
 from rrtq_controller.vf_lpc import KoopmanModel, LPCConfig, VFLPCController, fit_edmd
-from rrtq_planner import plan_cli
+from rrtq_common.polygon_set import PolygonSet
+from rrtq_planner import routes
 from rrtq_planner.guidance import GuidanceConfig, GuidanceTrack
 from rrtq_planner.shortcut import Shortener
 from rrtq_sim.plant import Plant, rover_matrices
-from rrtq_sim.polygon_set import PolygonSet
 
 __all__ = ['Bump', 'HarnessResult', 'bump_field', 'identify_by_probing', 'plan_path', 'rover_plant',
            'run_closed_loop']
@@ -94,9 +94,9 @@ def plan_path(obstacles: Sequence[np.ndarray], start: np.ndarray, goal: np.ndarr
               bounds: tuple[float, float, float, float], iterations: int,
               seed: int) -> np.ndarray:
     """RRT^X path on the augmented obstacles after a fixed iteration count, shortened."""
-    planner = plan_cli.make_planner(list(obstacles), start, goal, bounds, 0.0, seed)
+    planner = routes.make_planner(list(obstacles), start, goal, bounds, 0.0, seed)
     planner.run(iterations)
-    return plan_cli.shortest_route(planner, start, Shortener(list(obstacles)))
+    return routes.shortest_route(planner, start, Shortener(list(obstacles)))
 
 
 def run_closed_loop(plant: Plant, model: KoopmanModel, truth: Sequence[npt.ArrayLike],
@@ -116,7 +116,7 @@ def run_closed_loop(plant: Plant, model: KoopmanModel, truth: Sequence[npt.Array
     lpc = lpc or LPCConfig(force_limit=plant.force_limit)
     guidance = guidance or GuidanceConfig(mode='gvf', dt=plant.dt)
     true_polys = [np.asarray(p, dtype=float) for p in truth]
-    augmented = plan_cli.grow(true_polys, robot_radius + margin)
+    augmented = routes.grow(true_polys, robot_radius + margin)
     referee = PolygonSet(true_polys)
     start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
     path = plan_path(augmented, start, goal, bounds, iterations, seed)

@@ -11,7 +11,7 @@ import pytest
 
 from rrtq_bringup.vf_lpc_harness import Bump, identify_by_probing, rover_plant, run_closed_loop
 from rrtq_controller.vf_lpc import LPCConfig
-from rrtq_sim.obstacles import polygon_from_circle
+from rrtq_common.geometry import polygon_from_circle
 
 OBSTACLES = [polygon_from_circle((8.0, 1.0), 1.5, 16),
              np.array([[12.0, -6.0], [14.0, -6.0], [14.0, 3.0], [12.0, 3.0]]),

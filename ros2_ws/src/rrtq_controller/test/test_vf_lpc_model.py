@@ -25,11 +25,11 @@ def rover_zoh(mass, damping=45.0):
     return e[:4, :4], e[:4, 4:]
 
 
-def probe(phi, gamma, steps, rng, offset=np.zeros(4)):
+def probe(phi, gamma, steps, rng, offset=None):
     u = np.repeat(rng.uniform(-400, 400, (steps // 10 + 1, 2)), 10, axis=0)[:steps]
     x = np.zeros((steps + 1, 4))
     for k in range(steps):
-        x[k + 1] = phi @ x[k] + gamma @ u[k] + offset
+        x[k + 1] = phi @ x[k] + gamma @ u[k] + (0.0 if offset is None else offset)
     return x[:-1], u, x[1:]
 
 

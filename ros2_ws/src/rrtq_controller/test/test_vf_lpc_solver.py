@@ -12,8 +12,8 @@ from scipy.optimize import minimize
 
 from rrtq_controller.vf_lpc import KoopmanModel, LIFTINGS, LPCConfig, VFLPCController
 from rrtq_controller.vf_lpc.lpc import box_qp
-from rrtq_sim.obstacles import polygon_from_circle
-from rrtq_sim.polygon_set import PolygonSet
+from rrtq_common.geometry import polygon_from_circle
+from rrtq_common.polygon_set import PolygonSet
 
 DT = 0.05
 

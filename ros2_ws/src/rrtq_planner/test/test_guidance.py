@@ -1,37 +1,35 @@
 """Guiding level (VF-LPC §IV-A): the composite field's curve and reference, checked from outside.
 
 Ground truth that does not come from the code under test: clearance by
-``rrtq_sim.polygon_set.PolygonSet`` (the referee's distance), curvature as the
+``rrtq_common.polygon_set.PolygonSet`` (the referee's distance), curvature as the
 circumradius of consecutive reference points (Heron's formula here), speed from position
 differences, analytic fillet geometry, and RRT^X paths from the planner core.
 """
 
-import importlib.util
 import math
-import pathlib
 
 import numpy as np
 import pytest
 import yaml
 
-from rrtq_planner import plan_cli
+from rrtq_bringup.forest import forest_yaml
+from rrtq_common.geometry import polygon_from_circle
+from rrtq_common.polygon_set import PolygonSet
+from rrtq_planner import routes
 from rrtq_planner.guidance import (CurveStatus, FilletedPath, GuidanceConfig, GuidanceTrack,
                                    bump_weights, sample_in_time, speed_profile)
 from rrtq_planner.shortcut import Shortener
-from rrtq_sim.obstacles import polygon_from_circle
-from rrtq_sim.polygon_set import PolygonSet
+from rrtq_testing.paths import OTTE, read_otte
 
-ROOT = pathlib.Path(__file__).resolve().parents[4]
-OTTE = ROOT / 'ros2_ws/src/rrtq_sim/test/data/otte/rand_Static.txt'
 CFG = GuidanceConfig(mode='gvf')
 RADIUS = 0.5
 
 
 def rrtx_path(polygons, start, goal, bounds, iterations, seed):
     """The RRT^X tree path, shortened as ``rrtq plan`` does, after a fixed iteration count."""
-    planner = plan_cli.make_planner(polygons, start, goal, bounds, RADIUS, seed)
+    planner = routes.make_planner(polygons, start, goal, bounds, RADIUS, seed)
     planner.run(iterations)
-    return plan_cli.shortest_route(planner, start, Shortener(polygons))
+    return routes.shortest_route(planner, start, Shortener(polygons))
 
 
 def curvature_and_speed(ref):
@@ -98,10 +96,10 @@ def test_bump_weights_switch_between_the_boundaries():
 
 @pytest.fixture(scope='module')
 def otte():
-    env = plan_cli.load_environment(str(OTTE))
+    polygons = read_otte(OTTE / 'rand_Static.txt')
     start, goal = np.array([35.0, -40.0]), np.array([-40.0, 40.0])
-    grown = plan_cli.grow(env.polygons, RADIUS)
-    bounds = plan_cli.default_bounds(env.polygons, start, goal, RADIUS)
+    grown = routes.grow(polygons, RADIUS)
+    bounds = routes.default_bounds(polygons, start, goal, RADIUS)
     return grown, rrtx_path(grown, start, goal, bounds, 1500, 3)
 
 
@@ -109,23 +107,19 @@ def test_reference_on_otte_rand_static(otte):
     grown, path = otte
     track = GuidanceTrack(path, grown, CFG)
     curve, ref = full_reference(track, path[0])
-    check_reference(curve, ref, grown, plan_cli.path_length(path))
+    check_reference(curve, ref, grown, routes.path_length(path))
 
 
 def test_reference_in_a_forest():
-    spec = importlib.util.spec_from_file_location('make_forest',
-                                                  ROOT / 'scenarios/envs/make_forest.py')
-    forest = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(forest)
-    scenario = yaml.safe_load(forest.forest_yaml(4, count=90, size=50.0))
+    scenario = yaml.safe_load(forest_yaml(4, count=90, size=50.0))
     trees = [polygon_from_circle(o['circle']['center'], o['circle']['radius'], 16)
              for o in scenario['obstacles']]
-    grown = plan_cli.grow(trees, RADIUS)
+    grown = routes.grow(trees, RADIUS)
     start, goal = np.array(scenario['start'], float), np.array(scenario['goal'], float)
     path = rrtx_path(grown, start, goal, (0.0, 50.0, 0.0, 50.0), 800, 1)
     track = GuidanceTrack(path, grown, CFG)
     curve, ref = full_reference(track, start)
-    check_reference(curve, ref, grown, plan_cli.path_length(path))
+    check_reference(curve, ref, grown, routes.path_length(path))
 
 
 def occluded(virtual):

@@ -1,5 +1,8 @@
-"""VF-LPC control level (pure numpy/scipy): Koopman/EDMD model, online sparse GP,
-receding-horizon actor-critic with an exponential barrier. See docs/vf_lpc.md."""
+"""VF-LPC control level (pure numpy/scipy).
+
+Koopman/EDMD model, online sparse GP, receding-horizon actor-critic with an exponential
+barrier. See docs/vf_lpc.md.
+"""
 
 from .config import LPCConfig
 from .controller import VFLPCController, default_gp_config

@@ -1,9 +1,12 @@
-"""Configuration of the VF-LPC controller (frozen, validated, units in the field docs)."""
+"""Configuration of the VF-LPC controller: one frozen dataclass of settings."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
+
+from rrtq_common.settings import check, setting
 
 __all__ = ['LPCConfig']
 
@@ -12,54 +15,37 @@ __all__ = ['LPCConfig']
 class LPCConfig:
     """Receding-horizon actor-critic (VF-LPC §IV-C, §IV-D) and its online compensation.
 
-    Attributes
-    ----------
-    horizon_steps : int
-        N, prediction steps of dt (the model's dt); >= 1.
-    q_position, q_velocity : float
-        Diagonal of Q in eq. (12): cost per m² of position error, per (m/s)² of velocity
-        error, each step.
-    r_force : float
-        R in eq. (12): cost per N² of force, each step.
-    barrier_weight : float
-        beta of eq. (23): cost of one obstacle at distance ``barrier_offset``.
-    barrier_rate : float
-        eta of eq. (23), 1/m.
-    barrier_offset : float
-        d_0 of eq. (23), m from the augmented obstacle.
-    barrier_obstacles : int
-        K: the nearest K augmented obstacles carry a barrier.
-    iterations : int
-        Actor-critic iterations per control step (each a critic sweep and an actor step).
-    force_limit : float
-        N per axis: every command is in [-force_limit, force_limit].
-    compensate : bool
-        Learn the residual online with the sparse GP (eqs. 18-21); False: the nominal
-        Koopman model alone.
+    Every field is a :func:`rrtq_common.settings.setting` (default, unit, range, doc);
+    every number must also be finite.
     """
 
-    horizon_steps: int = 20
-    q_position: float = 100.0
-    q_velocity: float = 20.0
-    r_force: float = 1e-4
-    barrier_weight: float = 50.0
-    barrier_rate: float = 8.0
-    barrier_offset: float = 0.15
-    barrier_obstacles: int = 3
-    iterations: int = 2
-    force_limit: float = 1000.0
-    compensate: bool = True
+    horizon_steps: int = setting(20, low=1, doc='N, prediction steps of dt (the model\'s dt)')
+    q_position: float = setting(100.0, unit='1/m^2', low=0.0, low_open=True,
+                                doc='diagonal of Q in eq. (12): cost of position error, '
+                                'each step')
+    q_velocity: float = setting(20.0, unit='s^2/m^2', low=0.0,
+                                doc='diagonal of Q in eq. (12): cost of velocity error, '
+                                'each step')
+    r_force: float = setting(1e-4, unit='1/N^2', low=0.0, low_open=True,
+                             doc='R in eq. (12): cost of force, each step')
+    barrier_weight: float = setting(50.0, low=0.0, doc='beta of eq. (23): cost of one '
+                                    'obstacle at distance barrier_offset')
+    barrier_rate: float = setting(8.0, unit='1/m', low=0.0, low_open=True,
+                                  doc='eta of eq. (23)')
+    barrier_offset: float = setting(0.15, unit='m', doc='d_0 of eq. (23), from the '
+                                    'augmented obstacle')
+    barrier_obstacles: int = setting(3, low=0, doc='K: the nearest K augmented obstacles '
+                                     'carry a barrier')
+    iterations: int = setting(2, low=1, doc='actor-critic iterations per control step (each '
+                              'a critic sweep and an actor step)')
+    force_limit: float = setting(1000.0, unit='N', low=0.0, low_open=True,
+                                 doc='per axis: every command is in [-force_limit, force_limit]')
+    compensate: bool = setting(True, doc='learn the residual online with the sparse GP '
+                               '(eqs. 18-21); false: the nominal Koopman model alone')
 
     def __post_init__(self) -> None:
-        checks = {
-            'horizon_steps': self.horizon_steps >= 1,
-            'q_position': self.q_position > 0.0, 'q_velocity': self.q_velocity >= 0.0,
-            'r_force': self.r_force > 0.0, 'barrier_weight': self.barrier_weight >= 0.0,
-            'barrier_rate': self.barrier_rate > 0.0,
-            'barrier_offset': math.isfinite(self.barrier_offset),
-            'barrier_obstacles': self.barrier_obstacles >= 0,
-            'iterations': self.iterations >= 1, 'force_limit': self.force_limit > 0.0}
-        for key, ok in checks.items():
-            value = getattr(self, key)
-            if not ok or (isinstance(value, float) and not math.isfinite(value)):
-                raise ValueError(f'{key}: invalid value {value!r}')
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ValueError(f'{f.name} must be finite, got {value!r}')
+        check(self)

@@ -51,7 +51,7 @@ class HorizonSolution:
 
 def box_qp(H: np.ndarray, g: np.ndarray, lo: np.ndarray, hi: np.ndarray, x0: np.ndarray,
            max_iter: int = 20) -> np.ndarray:
-    """argmin ½ xᵀ H x + gᵀ x on lo <= x <= hi (H positive definite): projected Newton.
+    """Minimise ½ xᵀ H x + gᵀ x on lo <= x <= hi (H positive definite): projected Newton.
 
     Each iteration fixes the variables at a bound whose gradient pushes outward, takes the
     Newton step on the others and projects, with backtracking on the objective.
@@ -125,7 +125,8 @@ class RecedingHorizonActorCritic:
         """Forget the warm start."""
         self._us = self._xs = None
 
-    def _condense(self, x0, fbar, A, B, xbar, ubar):
+    def _condense(self, x0: np.ndarray, fbar: np.ndarray, A: np.ndarray, B: np.ndarray,
+                  xbar: np.ndarray, ubar: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Phi x0 + s and Gamma of X = (x_1..x_N) for the model linearised at (xbar, ubar)."""
         N, n, m = len(A), self.n, self.m
         c = fbar - np.einsum('kij,kj->ki', A, xbar) - np.einsum('kij,kj->ki', B, ubar)
@@ -166,8 +167,8 @@ class RecedingHorizonActorCritic:
                 a is not b for a, b in zip(obstacles, self._edge_polys)):
             self._edges, self._edge_polys = EdgeSet(obstacles), list(obstacles)
         edges = self._edges
-        N, n, m = cfg.horizon_steps, self.n, self.m
-        if self._us is None:
+        N, m = cfg.horizon_steps, self.m
+        if self._us is None or self._xs is None:
             us, xbar = np.zeros((N, m)), np.repeat(x0[None], N, axis=0)
         else:                            # the last solution, one stage on
             us = np.vstack((self._us[1:], self._us[-1:]))

@@ -20,10 +20,12 @@ for M dictionary points (times the outputs for S_j), so one update costs O(q M²
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
+
+from rrtq_common.settings import check, setting
 
 __all__ = ['SparseGPConfig', 'OnlineSparseGP']
 
@@ -32,39 +34,33 @@ __all__ = ['SparseGPConfig', 'OnlineSparseGP']
 class SparseGPConfig:
     """Hyperparameters and dictionary of the online FITC GP.
 
-    Attributes
-    ----------
-    lengthscales : tuple of float
-        l_d, one per input dimension, in that input's unit.
-    signal_std : tuple of float
-        s_j, one per output, in that output's unit.
-    noise_std : tuple of float
-        sigma_j, one per output (observation noise), in that output's unit.
-    max_dictionary : int
-        M: the dictionary never holds more points.
-    ald_threshold : float
-        nu (dimensionless, of the unit-variance kernel): the ALD residual above which a
-        point joins the dictionary.
+    Every field is a :func:`rrtq_common.settings.setting`; the three tuples must be
+    non-empty and finite, ``signal_std`` and ``noise_std`` of one length (the outputs).
     """
 
-    lengthscales: tuple[float, ...]
-    signal_std: tuple[float, ...]
-    noise_std: tuple[float, ...]
-    max_dictionary: int = field(default=60, metadata={'low': 1, 'high': 2000})
-    ald_threshold: float = field(default=0.1, metadata={'low': 0.0, 'high': 1.0})
+    lengthscales: tuple[float, ...] = setting(
+        low=0.0, low_open=True, doc="l_d, one per input dimension, in that input's unit")
+    signal_std: tuple[float, ...] = setting(
+        low=0.0, low_open=True, doc="s_j, one per output, in that output's unit")
+    noise_std: tuple[float, ...] = setting(
+        low=0.0, low_open=True,
+        doc="sigma_j, one per output (observation noise), in that output's unit")
+    max_dictionary: int = setting(60, low=1, high=2000,
+                                  doc='M: the dictionary never holds more points')
+    ald_threshold: float = setting(
+        0.1, low=0.0, high=1.0, low_open=True, high_open=True,
+        doc='nu (of the unit-variance kernel): the ALD residual above which a point joins '
+        'the dictionary')
 
     def __post_init__(self) -> None:
         for name in ('lengthscales', 'signal_std', 'noise_std'):
             values = tuple(float(v) for v in getattr(self, name))
-            if not values or not all(math.isfinite(v) and v > 0.0 for v in values):
+            if not values or not all(math.isfinite(v) for v in values):
                 raise ValueError(f'{name} must be positive and finite, got {values}')
             object.__setattr__(self, name, values)
         if len(self.signal_std) != len(self.noise_std):
             raise ValueError('signal_std and noise_std need one value per output')
-        if not 1 <= self.max_dictionary <= 2000:
-            raise ValueError(f'max_dictionary must be in [1, 2000], got {self.max_dictionary}')
-        if not 0.0 < self.ald_threshold < 1.0:
-            raise ValueError(f'ald_threshold must be in (0, 1), got {self.ald_threshold}')
+        check(self)
 
 
 class OnlineSparseGP:

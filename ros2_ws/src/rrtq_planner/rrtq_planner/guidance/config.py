@@ -1,11 +1,13 @@
-"""Configuration of the guiding level (VF-LPC §IV-A): one frozen dataclass, units in metadata."""
+"""Configuration of the guiding level (VF-LPC §IV-A): one frozen dataclass of settings."""
 
 from __future__ import annotations
 
 import dataclasses
 import enum
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
+
+from rrtq_common.settings import check, setting
 
 __all__ = ['GuidanceMode', 'GuidanceConfig', 'CurveStatus']
 
@@ -30,66 +32,62 @@ class CurveStatus(enum.StrEnum):
     """No progress along the desired path over ``stall_distance`` of curve (a deadlock)."""
 
 
-def _f(default: float, unit: str, low: float, high: float, doc: str, *,
-       low_open: bool = False) -> float:
-    return field(default=default, metadata={'unit': unit, 'low': low, 'high': high,
-                                            'low_open': low_open, 'doc': doc})
-
-
 @dataclass(frozen=True)
 class GuidanceConfig:
     """Parameters of the kinodynamic composite guiding vector field and its rollout.
 
-    Every field's metadata carries ``unit``, ``low``, ``high`` (closed range, ``low_open``
-    when the low end is excluded) and ``doc``; ``planner.guidance`` keys are these names.
+    Every field is a :func:`rrtq_common.settings.setting` (default, unit, range, doc);
+    ``planner.guidance`` keys are these names.
     """
 
-    mode: GuidanceMode = GuidanceMode.WAYPOINTS
-    k_path: float = _f(1.0, '1/m', 0.0, 100.0, 'gain k_p of the path-following field '
-                       'chi_P = -E grad(phi) - k_p phi grad(phi) (Yao et al. 2022)',
-                       low_open=True)
-    k_obstacle: float = _f(1.0, '1/m', 0.0, 100.0, 'gain k_r of each obstacle field chi_R',
-                           low_open=True)
-    reactive_width: float = _f(1.0, 'm', 0.0, 20.0, 'distance from an augmented obstacle '
-                               'to its reactive boundary R (where the field starts to bend)',
-                               low_open=True)
-    repulsive_offset: float = _f(0.1, 'm', 0.0, 5.0, 'distance from an augmented obstacle '
-                                 'to its repulsive boundary Q (never crossed); below '
-                                 'reactive_width')
-    bump_rate: float = _f(1.0, '1', 0.0, 100.0, 'rate l of the bump functions '
-                          'exp(-l/s), exp(-l/(1-s)) across the sandwiched region',
-                          low_open=True)
-    a_max: float = _f(2.0, 'm/s^2', 0.0, 100.0, 'acceleration limit: v^2 kappa <= a_max '
-                      'along the reference, and |dv/dt| <= a_max', low_open=True)
-    v_max: float = _f(2.0, 'm/s', 0.0, 50.0, 'desired (and largest) speed v_d of the '
-                      'reference', low_open=True)
-    virtual_gain: float = _f(2.0, '1/m', 0.0, 100.0, 'k_v of eq. (16): how fast a virtual '
-                             "obstacle's field fades towards the real reactive boundary",
-                             low_open=True)
-    step: float = _f(0.05, 'm', 0.0, 1.0, 'arclength step h of the discrete integral '
-                     'curve (eq. 17)', low_open=True)
-    deadlock_epsilon: float = _f(1e-3, '1', 0.0, 1.0, 'eps of eq. (17): a field vector '
-                                 'shorter than this inherits the previous direction',
-                                 low_open=True)
-    stall_distance: float = _f(20.0, 'm', 0.0, 1e4, 'curve length without progress along '
-                               'the desired path that counts as a deadlock', low_open=True)
-    horizon: float = _f(5.0, 's', 0.0, 600.0, 'length of the published reference',
-                        low_open=True)
-    dt: float = _f(0.05, 's', 0.0, 1.0, 'sample period of the reference (the control '
-                   'period)', low_open=True)
+    mode: GuidanceMode = setting(GuidanceMode.WAYPOINTS,
+                                 doc='what the planner hands the controller')
+    k_path: float = setting(
+        1.0, unit='1/m', low=0.0, high=100.0, low_open=True,
+        doc='gain k_p of the path-following field chi_P = -E grad(phi) - k_p phi grad(phi) '
+        '(Yao et al. 2022)')
+    k_obstacle: float = setting(1.0, unit='1/m', low=0.0, high=100.0, low_open=True,
+                                doc='gain k_r of each obstacle field chi_R')
+    reactive_width: float = setting(
+        1.0, unit='m', low=0.0, high=20.0, low_open=True,
+        doc='distance from an augmented obstacle to its reactive boundary R (where the field '
+        'starts to bend)')
+    repulsive_offset: float = setting(
+        0.1, unit='m', low=0.0, high=5.0,
+        doc='distance from an augmented obstacle to its repulsive boundary Q (never crossed); '
+        'below reactive_width')
+    bump_rate: float = setting(
+        1.0, unit='1', low=0.0, high=100.0, low_open=True,
+        doc='rate l of the bump functions exp(-l/s), exp(-l/(1-s)) across the sandwiched region')
+    a_max: float = setting(
+        2.0, unit='m/s^2', low=0.0, high=100.0, low_open=True,
+        doc='acceleration limit: v^2 kappa <= a_max along the reference, and |dv/dt| <= a_max')
+    v_max: float = setting(2.0, unit='m/s', low=0.0, high=50.0, low_open=True,
+                           doc='desired (and largest) speed v_d of the reference')
+    virtual_gain: float = setting(
+        2.0, unit='1/m', low=0.0, high=100.0, low_open=True,
+        doc="k_v of eq. (16): how fast a virtual obstacle's field fades towards the real "
+        'reactive boundary')
+    step: float = setting(0.05, unit='m', low=0.0, high=1.0, low_open=True,
+                          doc='arclength step h of the discrete integral curve (eq. 17)')
+    deadlock_epsilon: float = setting(
+        1e-3, unit='1', low=0.0, high=1.0, low_open=True,
+        doc='eps of eq. (17): a field vector shorter than this inherits the previous direction')
+    stall_distance: float = setting(
+        20.0, unit='m', low=0.0, high=1e4, low_open=True,
+        doc='curve length without progress along the desired path that counts as a deadlock')
+    horizon: float = setting(5.0, unit='s', low=0.0, high=600.0, low_open=True,
+                             doc='length of the published reference')
+    dt: float = setting(0.05, unit='s', low=0.0, high=1.0, low_open=True,
+                        doc='sample period of the reference (the control period)')
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'mode', GuidanceMode(self.mode))
         for f in dataclasses.fields(self):
-            if 'unit' not in f.metadata:
-                continue
             value = getattr(self, f.name)
-            lo, hi = f.metadata['low'], f.metadata['high']
-            bad_low = value <= lo if f.metadata['low_open'] else value < lo
-            if not math.isfinite(value) or bad_low or value > hi:
-                bracket = '(' if f.metadata['low_open'] else '['
-                raise ValueError(f'{f.name} must be in {bracket}{lo:g}, {hi:g}] '
-                                 f"{f.metadata['unit']}, got {value!r}")
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ValueError(f'{f.name} must be finite, got {value!r}')
+        check(self)
         if self.repulsive_offset >= self.reactive_width:
             raise ValueError(f'repulsive_offset ({self.repulsive_offset:g} m) must be below '
                              f'reactive_width ({self.reactive_width:g} m)')

@@ -242,11 +242,11 @@ def place_virtual_obstacles(path: FilletedPath, obstacles: PolygonDistances,
     if occluding:
         for s, p in zip(np.arange(0.0, path.length + ds, ds),
                         path.point(np.arange(0.0, path.length + ds, ds))):
-            idx = [i for i in obstacles.near(p, cfg.reactive_width)
-                   if int(i) in occluding and int(i) not in first_r]
-            if idx:
-                d, _ = obstacles.signed(p, idx)
-                first_r.update((int(i), float(s)) for i, di in zip(idx, d)
+            close = [i for i in obstacles.near(p, cfg.reactive_width)
+                     if int(i) in occluding and int(i) not in first_r]
+            if close:
+                d, _ = obstacles.signed(p, close)
+                first_r.update((int(i), float(s)) for i, di in zip(close, d)
                                if di <= cfg.reactive_width)
     virtual: list[VirtualObstacle] = []
     circulation: dict[int, float] = {}
@@ -260,12 +260,12 @@ def place_virtual_obstacles(path: FilletedPath, obstacles: PolygonDistances,
         side = 1.0 if left else -1.0
         circulation[i] = -side           # passed on the left: obstacle on the right, cw
 
-        def centre(s0: float) -> np.ndarray:
+        def centre(s0: float, side: float = side) -> np.ndarray:
             p0 = path.point(s0)
             n = _rot(path.query(p0).grad) * -1.0
             return p0 + side * r * _rot(n)
 
-        def gap(s0: float) -> float:
+        def gap(s0: float, i: int = i) -> float:
             return float(obstacles.signed(centre(s0), [i])[0][0]) - (r + cfg.reactive_width)
 
         lo, hi = max(s_e - 4.0 * r, 0.0), s_e
