@@ -73,10 +73,13 @@ class LearnedBoundConfig:
     cell: float = 1.0
     """m: spacing of the cells the band's supremum is taken over."""
     reach: float = 1.0
-    """m: a cell counts as visited when a residual was taken within this distance. The band's
-    supremum is taken over the visited cells within twice the longest leg of the window
-    (at least twice ``feature_spacing``) of the robot: where the next legs go and the data
-    say something (``docs/margins.md`` §3)."""
+    """m: a cell counts as visited when a residual was taken within this distance."""
+    support: float = 0.3
+    """The band's supremum is taken over the visited cells within twice the longest leg of
+    the window (at least twice ``feature_spacing``) of the robot where the data have cut the
+    band's width to at most this fraction of the prior's (√λ ‖φ‖_{V⁻¹} <= support): where
+    the next legs go and the data say something. Elsewhere the bound is extrapolated, and a
+    residual above it raises it at once (``docs/margins.md`` §3)."""
     bank_ratio: float = 0.8
     """Ratio of neighbouring levels of the bank."""
     noise_allowance: float = 4.0
@@ -85,15 +88,18 @@ class LearnedBoundConfig:
     """μ: precision of the model's prior Φ = I, Γ = 0 (negligible against a leg of data)."""
     evaluation_period: float = 2.0
     """s between fits within a leg (a fit also ends every leg)."""
+    recent_legs: int = 10
+    """Leg starts (the last ones, the current included) replayed through the current closed
+    loop for the nominal part: how the robot enters its legs now, not during a transient."""
     directions: int = 16
     """Directions of a leg's normal the tube is maximised over."""
 
     def __post_init__(self) -> None:
         if not 0.0 < self.confidence < 1.0:
             raise ValueError(f'confidence must be in (0, 1), got {self.confidence!r}')
-        if self.window < 1 or self.dt <= 0.0 or self.evaluation_period <= 0.0:
-            raise ValueError('need window >= 1, dt > 0, evaluation_period > 0')
-        for name in ('feature_spacing', 'ridge', 'cell', 'reach', 'prior_bound', 'weight_bound',
+        if self.window < 1 or self.recent_legs < 1 or self.dt <= 0.0 or self.evaluation_period <= 0.0:
+            raise ValueError('need window >= 1, recent_legs >= 1, dt > 0, evaluation_period > 0')
+        for name in ('feature_spacing', 'ridge', 'cell', 'reach', 'support', 'prior_bound', 'weight_bound',
                      'noise_floor', 'model_prior_precision'):
             if not getattr(self, name) > 0.0:
                 raise ValueError(f'{name} must be > 0, got {getattr(self, name)!r}')
@@ -277,7 +283,11 @@ class LearnedBoundPolicy:
         self.fit, self.theta, self.sigma = fit, fit.model, fit.sigma
         reach = 2.0 * max([d0 for d0 in self._leg_lengths()] + [c.feature_spacing])
         near = np.hypot(*(self.cells - state[:2]).T) <= reach
-        self.region = near & np.logical_or.reduce([b.visited for b in blocks])
+        region = near & np.logical_or.reduce([b.visited for b in blocks])
+        idx = np.flatnonzero(region)
+        supported = math.sqrt(c.ridge) * fit.spread(self._cell_phi[idx]) <= c.support
+        self.region = np.zeros_like(region)
+        self.region[idx[supported]] = True
         if not self.region.any():
             return
         mean, half = fit.band(self._cell_phi[self.region])
@@ -311,7 +321,7 @@ class LearnedBoundPolicy:
         source = self.data[-1] if self.data else self.current
         std, corr = source.probing_statistics(self.m) if source is not None else (0.0, 0.0)
         self.spread = random_deviation(phi, gamma, gains, self.sigma, std, corr)
-        starts = self.legs.started[-(self.config.window + 1):]
+        starts = self.legs.started[-self.config.recent_legs:]
         self.nominal = float(nominal_deviation(
             phi, gamma, offset, gains, np.array([s for _, s, _ in starts]),
             np.array([g for _, _, g in starts])).max())
