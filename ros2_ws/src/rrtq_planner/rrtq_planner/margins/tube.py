@@ -70,12 +70,15 @@ def tube_gains(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray, shape: npt
     out = np.zeros(N)
     # At iteration k, blocks = [Ψ(k+1, 1), ..., Ψ(k+1, k+1) = I]; Ψ(k+1, j+1) = A_k Ψ(k, j+1)
     # multiplies on the left, so whole blocks are kept, not just their position rows.
-    blocks = np.eye(n)[None]
+    # Kept right-aligned in one array: at iteration k, blocks[N-1-k:] (oldest first).
+    blocks = np.empty((N, n, n))
+    blocks[N - 1] = np.eye(n)
     for k in range(N):
         if k:
-            blocks = np.concatenate([np.einsum('ij,kjl->kil', a[k], blocks), np.eye(n)[None]])
-        proj = np.einsum('dr,krn->dkn', c, blocks[:, :2, :])          # cᵀPΨ, (D, k+1, n)
-        out[k] = widen * (np.abs(proj) @ s).sum(axis=1).max()
+            blocks[N - 1 - k:N - 1] = a[k] @ blocks[N - k:]
+            blocks[N - 1] = np.eye(n)
+        proj = c @ blocks[N - 1 - k:, :2, :]                            # cᵀPΨ, (k+1, D, n)
+        out[k] = widen * (np.abs(proj) @ s).sum(axis=0).max()
     return out
 
 
@@ -101,12 +104,14 @@ def random_deviation(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray,
     big = np.zeros((n + m, n + m))
     big[:n, n:] = gamma
     big[n:, n:] = rho * np.eye(m)
-    out = np.zeros(N)
+    pos = np.zeros((N, 3))                # (Σ_xx, Σ_yy, Σ_xy) of the position
     for k in range(N):
         big[:n, :n] = a[k]
         cov = big @ cov @ big.T + q
-        out[k] = math.sqrt(max(np.linalg.eigvalsh(cov[:2, :2])[-1], 0.0))
-    return out
+        pos[k] = cov[0, 0], cov[1, 1], cov[0, 1]
+    half = 0.5 * (pos[:, 0] + pos[:, 1])
+    top = half + np.sqrt((0.5 * (pos[:, 0] - pos[:, 1])) ** 2 + pos[:, 2] ** 2)
+    return np.sqrt(np.maximum(top, 0.0))
 
 
 def nominal_deviation(phi: np.ndarray, gamma: np.ndarray, offset: np.ndarray,
