@@ -217,7 +217,8 @@ def render(rows, rows2, seg_hits, seg_margin, leg_hits, costs, phi_err, reached,
     lines = [f'{missions // 2} seeds x 2 missions of the rover without a spring (Q-learning '
              f'controller, probing 20 N decaying 0.85/leg) along 3.5 m legs through a field '
              f'(gust bump 0.32 m/s² at the start, 0.18 m/s² mid-way); {reached}/{missions} '
-             f'missions reached the route\'s end. Coverage = legs whose largest deviation '
+             f'missions reached the route\'s end (400 s each). In the second mission only the '
+             f'conformal modes start from the first mission\'s scores. Coverage = legs whose largest deviation '
              f'stayed within the margin in force at their start (1 − δ = 0.95; 95 % '
              f'Clopper-Pearson interval).', '',
              '| mode | mission | legs | violations | coverage [interval] | mean margin (m) | '
