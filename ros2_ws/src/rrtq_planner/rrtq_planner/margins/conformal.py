@@ -1,0 +1,129 @@
+"""Split-conformal margin over leg scores, plain and adaptive (``docs/margins.md`` §2).
+
+A leg's score is its largest deviation D_rob from its straight edge (RRT-QX eq. 6). With
+the last n scores of a window, the ⌈(n+1)(1−δ)⌉-th smallest is a margin the next score
+stays under with probability at least 1 − δ when the scores are exchangeable (split
+conformal prediction: Vovk et al. 2005; Lei et al. 2018, Theorem 2.1). The controller keeps
+learning, so scores drift and are not exchangeable; the adaptive form (adaptive conformal
+inference, Gibbs & Candès 2021) moves the level δ_t after each leg,
+
+    δ_{t+1} = δ_t + η (δ − miss_t),     miss_t = 1 if score_t > margin_t,
+
+which keeps the long-run miss rate within (max(δ, 1 − δ) + η) / (η T) of δ over any T
+legs, whatever the scores do (their Proposition 4.1). η = 0 is the plain form.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections import deque
+from collections.abc import Iterable
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ['ConformalConfig', 'ConformalQuantile', 'conformal_rank', 'conformal_quantile',
+           'minimum_scores', 'aci_miss_rate_bound']
+
+
+def conformal_rank(n: int, delta: float) -> int:
+    """⌈(n + 1)(1 − δ)⌉: the rank (1-based, ascending) of the conformal quantile of n scores."""
+    # The product is exact for the usual δ; the guard keeps 0.95 * 20 = 19.000000000000004
+    # from rounding up to 20.
+    return math.ceil((n + 1) * (1.0 - delta) - 1e-9)
+
+
+def minimum_scores(delta: float) -> int:
+    """⌈1/δ⌉ − 1: the fewest scores for which the conformal quantile at level δ is finite."""
+    return math.ceil(1.0 / delta - 1e-9) - 1
+
+
+def conformal_quantile(scores: npt.ArrayLike, delta: float) -> float:
+    """The ⌈(n+1)(1−δ)⌉-th smallest of the n scores.
+
+    +inf when that rank exceeds n (too few scores to certify 1 − δ: the conformal set is
+    everything), 0 when it is below 1 (δ ≥ 1: the empty set; scores are ≥ 0).
+    """
+    s = np.asarray(scores, dtype=float).reshape(-1)
+    rank = conformal_rank(s.size, delta)
+    if rank > s.size:
+        return math.inf
+    if rank < 1:
+        return 0.0
+    return float(np.partition(s, rank - 1)[rank - 1])
+
+
+def aci_miss_rate_bound(delta: float, eta: float, legs: int) -> float:
+    """|miss rate − δ| over ``legs`` legs is at most this for the adaptive form (η > 0)."""
+    return (max(delta, 1.0 - delta) + eta) / (eta * legs)
+
+
+@dataclasses.dataclass(frozen=True)
+class ConformalConfig:
+    """Parameters of the conformal margin."""
+
+    confidence: float = 0.95
+    """1 − δ: the probability with which the next leg's score stays under the margin."""
+    window: int = 50
+    """Legs kept: the margin is a quantile of the last ``window`` scores."""
+    adaptation: float = 0.05
+    """η, the step of the adaptive level δ_t per leg; 0 gives the plain form."""
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.confidence < 1.0:
+            raise ValueError(f'confidence must be in (0, 1), got {self.confidence!r}')
+        if self.window < 1:
+            raise ValueError(f'window must be >= 1 leg, got {self.window!r}')
+        if not (math.isfinite(self.adaptation) and self.adaptation >= 0.0):
+            raise ValueError(f'adaptation must be finite and >= 0, got {self.adaptation!r}')
+
+    @property
+    def delta(self) -> float:
+        """δ = 1 − confidence."""
+        return 1.0 - self.confidence
+
+
+class ConformalQuantile:
+    """The window of leg scores, the adaptive level δ_t and the misses.
+
+    Parameters
+    ----------
+    config
+        Confidence, window, adaptation.
+    calibration
+        Scores of earlier runs (oldest first): they fill the window before this run's own.
+    """
+
+    def __init__(self, config: ConformalConfig, calibration: Iterable[float] = ()) -> None:
+        self.config = config
+        self.scores: deque[float] = deque(maxlen=config.window)
+        for s in calibration:
+            self.scores.append(float(s))
+        self.delta_t = config.delta
+        self.legs = 0
+        self.misses = 0
+
+    @property
+    def level(self) -> float:
+        """1 − δ_t, clipped to [0, 1]: the confidence the current quantile is taken at."""
+        return min(max(1.0 - self.delta_t, 0.0), 1.0)
+
+    @property
+    def margin(self) -> float:
+        """The conformal quantile of the window at δ_t, m (+inf: not enough scores)."""
+        return conformal_quantile(np.fromiter(self.scores, float, len(self.scores)),
+                                  self.delta_t)
+
+    def observe(self, score: float, margin_used: float) -> bool:
+        """Account a finished leg: its score, and the margin that was in force for it.
+
+        Returns True when the score exceeded that margin (a miss); the level δ_t then moves
+        by the adaptive step, and the score joins the window.
+        """
+        miss = bool(score > margin_used)
+        self.legs += 1
+        self.misses += miss
+        self.delta_t += self.config.adaptation * (self.config.delta - miss)
+        self.scores.append(float(score))
+        return miss

@@ -1,0 +1,341 @@
+"""``learned_bound``: Jha's data-driven bound, turned into a margin through the closed loop.
+
+Per step (``docs/margins.md`` §3-4): the pair (x̄_{k−1}, u_{k−1}) → x̄_k joins the sufficient
+statistics of the current leg, with the features φ(p_{k−1}) of where the residual acted; a
+residual of the last fitted model above the bank's level (plus the noise allowance) raises
+the level at once (:mod:`.bank`).
+
+At each leg start and every ``evaluation_period``: the one-step model x̄_{k+1} ≈ Φ̂x̄_k + Γ̂u_k
+and the residual's field over the plane are fitted together on the last ``window`` legs
+(:func:`.regression.fit_field` with a model block: least squares, as a recursive fit would
+give, but kept as per-leg statistics so that old legs can leave the window, and joint so
+that the linear model cannot soak up the field); r_k is the supremum of the norm of the
+upper band over the visited cells near the robot, and the bank follows it. At each leg
+start: the closed loop Φ̂ − Γ̂K̂(τ) of the controller's current gain, its worst-case tube
+and random spread (:mod:`.tube`). The margin is the nominal deviation of the window's leg
+starts under that loop, plus r times the tube, plus z standard deviations of the spread.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from collections import deque
+
+import numpy as np
+from scipy.stats import norm
+
+from .bank import BoundBank
+from .policy import LegTracker, MarginMode, MarginSample, MarginStatus
+from .regression import FieldFit, FieldStatistics, RBFFeatures, fit_field
+from .tube import nominal_deviation, random_deviation, tube_gains, tube_margin
+
+__all__ = ['ModelFrame', 'LearnedBoundConfig', 'LearnedBoundPolicy']
+
+Bounds = tuple[tuple[float, float], tuple[float, float]]
+
+
+class ModelFrame(enum.StrEnum):
+    """Where the observer's one-step model is time-invariant (the rover's spring anchor)."""
+
+    LEG_TARGET = 'leg_target'
+    """x̄ relative to the current leg's target at rest."""
+    WORLD_ORIGIN = 'world_origin'
+    """x̄ = x."""
+
+
+@dataclasses.dataclass(frozen=True)
+class LearnedBoundConfig:
+    """Parameters of ``learned_bound``."""
+
+    region: Bounds
+    """((x_min, x_max), (y_min, y_max)), m: where the field is learned (the scenario's bounds)."""
+    dt: float
+    """Δt, s: the step of the loop (the controller's τ grid over a leg)."""
+    frame: ModelFrame = ModelFrame.LEG_TARGET
+    """Frame of the one-step model: ``plant.spring_anchor`` (either without a spring)."""
+    confidence: float = 0.95
+    """1 − δ of the simultaneous band (and of the noise part of the tube)."""
+    window: int = 50
+    """Legs of residual data the field is fitted on."""
+    feature_spacing: float = 4.0
+    """m: spacing and length scale of the radial basis functions."""
+    ridge: float = 1.0
+    """λ of the regression (the features are of order 1)."""
+    prior_bound: float = 0.5
+    """R, m/s²: the field strength assumed possible before the data say otherwise (Jha's
+    assumption 3.1); per component of the residual R Δt on velocities, R Δt²/2 on positions."""
+    weight_bound: float = 1.5
+    """S_c = this × max(‖ŵ_c‖, R_c): the bound of the field's weight norm the band assumes."""
+    noise_floor: float = 1e-5
+    """Lower bound of the residual noise σ_c, state units per step."""
+    cell: float = 1.0
+    """m: spacing of the cells the band's supremum is taken over."""
+    reach: float = 1.0
+    """m: a cell counts as visited when a residual was taken within this distance."""
+    support: float = 0.3
+    """The band's supremum is taken over the visited cells within twice the longest leg of
+    the window (at least twice ``feature_spacing``) of the robot where the data have cut the
+    band's width to at most this fraction of the prior's (√λ ‖φ‖_{V⁻¹} <= support): where
+    the next legs go and the data say something. Elsewhere the bound is extrapolated, and a
+    residual above it raises it at once (``docs/margins.md`` §3)."""
+    bank_ratio: float = 0.8
+    """Ratio of neighbouring levels of the bank."""
+    noise_allowance: float = 4.0
+    """A residual raises the bank when a component exceeds its bound by this many σ̂_i."""
+    model_prior_precision: float = 1e-6
+    """μ: precision of the model's prior Φ = I, Γ = 0 (negligible against a leg of data)."""
+    evaluation_period: float = 2.0
+    """s between fits within a leg (a fit also ends every leg)."""
+    recent_legs: int = 10
+    """Leg starts (the last ones, the current included) replayed through the current closed
+    loop for the nominal part: how the robot enters its legs now, not during a transient."""
+    directions: int = 16
+    """Directions of a leg's normal the tube is maximised over."""
+
+    def __post_init__(self) -> None:
+        if not 0.0 < self.confidence < 1.0:
+            raise ValueError(f'confidence must be in (0, 1), got {self.confidence!r}')
+        if self.window < 1 or self.recent_legs < 1 or self.dt <= 0.0 or self.evaluation_period <= 0.0:
+            raise ValueError('need window >= 1, recent_legs >= 1, dt > 0, evaluation_period > 0')
+        for name in ('feature_spacing', 'ridge', 'cell', 'reach', 'support', 'prior_bound', 'weight_bound',
+                     'noise_floor', 'model_prior_precision'):
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f'{name} must be > 0, got {getattr(self, name)!r}')
+
+
+class _LegData:
+    """One leg's samples: statistics for the joint fit, visited cells, probing moments."""
+
+    def __init__(self, p: int, n: int, d: int, cells: int) -> None:
+        self.stats = FieldStatistics.zeros(p, n, d)
+        self.visited = np.zeros(cells, dtype=bool)
+        self.probing = np.zeros(3)            # Σ‖p‖², Σ p_k·p_{k−1}, pairs
+        self._last_probe: np.ndarray | None = None
+
+    @property
+    def count(self) -> int:
+        return self.stats.count
+
+    def add_probing(self, p: np.ndarray) -> None:
+        lag = 0.0 if self._last_probe is None else float(p @ self._last_probe)
+        self.probing += (float(p @ p), lag, float(self._last_probe is not None))
+        self._last_probe = p.copy()
+
+    def probing_statistics(self, m: int) -> tuple[float, float]:
+        """(stationary std per component, N; lag-one correlation) of the leg's probing."""
+        sq, lag, pairs = self.probing
+        if pairs < 2 or sq <= 0.0:
+            return 0.0, 0.0
+        steps = pairs + 1
+        return math.sqrt(sq / (steps * m)), min(max(lag / sq * steps / pairs, 0.0), 0.999)
+
+
+class LearnedBoundPolicy:
+    """Margin from a learned residual bound through the current closed loop.
+
+    Parameters
+    ----------
+    config
+        See :class:`LearnedBoundConfig`.
+    n, m
+        State and input dimensions.
+    initial_margin
+        m, the margin while the bank has no finite level; None: the running max of D_rob.
+    """
+
+    mode = MarginMode.LEARNED_BOUND
+
+    def __init__(self, config: LearnedBoundConfig, n: int = 4, m: int = 2,
+                 initial_margin: float | None = None) -> None:
+        self.config = config
+        self.n, self.m, self.d = n, m, n + m
+        self.initial_margin = initial_margin
+        self.features = RBFFeatures(config.region, config.feature_spacing)
+        (x0, x1), (y0, y1) = config.region
+        self._nx = int(math.floor((x1 - x0) / config.cell)) + 1
+        self._ny = int(math.floor((y1 - y0) / config.cell)) + 1
+        gx, gy = np.meshgrid(x0 + config.cell * np.arange(self._nx),
+                             y0 + config.cell * np.arange(self._ny), indexing='ij')
+        self.cells = np.column_stack([gx.ravel(), gy.ravel()])
+        self._cell_phi = self.features(self.cells)
+        r = int(math.ceil(config.reach / config.cell))
+        di, dj = np.meshgrid(np.arange(-r, r + 1), np.arange(-r, r + 1), indexing='ij')
+        keep = np.hypot(di, dj) * config.cell <= config.reach
+        self._stencil = np.column_stack([di[keep], dj[keep]])
+        self._prior = (np.hstack([np.eye(n), np.zeros((n, m))]), config.model_prior_precision)
+        self._prior_residual = np.full(n, config.prior_bound * config.dt)
+        self._prior_residual[:2] = 0.5 * config.prior_bound * config.dt**2
+        self.bank = BoundBank(config.bank_ratio)
+        self.legs = LegTracker()
+        self.data: deque[_LegData] = deque(maxlen=config.window)
+        self.current: _LegData | None = None
+        self.theta: np.ndarray | None = None
+        """Θ̂ = [Φ̂ | Γ̂] (n, n + m) of the last fit; None before the first."""
+        self.sigma = np.full(n, config.noise_floor)
+        self.fit: FieldFit | None = None
+        """The last fit of the residual's field (for ``/safety/disturbance_estimate``)."""
+        self.region = np.zeros(len(self.cells), dtype=bool)
+        """Cells the band's supremum was last taken over (visited, near the robot)."""
+        self.tube: np.ndarray | None = None
+        """Worst-case deviation per unit bound over a leg (:func:`.tube.tube_gains`)."""
+        self.spread: np.ndarray | None = None
+        """Standard deviation of the random deviation over a leg (:func:`.tube.random_deviation`)."""
+        self.nominal = 0.0
+        self.model_margin = math.inf
+        self.leg_margin = self._margin()
+        self.last_fit = -math.inf
+        self.flagged = False
+        self.misses = 0
+        self._delta = 1.0 - config.confidence
+        self._previous: np.ndarray | None = None   # x_{k−1}, world frame
+
+    # ------------------------------------------------------------------ interface
+    @property
+    def scores(self) -> list[float]:
+        return self.legs.scores
+
+    @property
+    def samples(self) -> int:
+        """Residual samples in the window."""
+        return sum(d.count for d in self.data) + (self.current.count if self.current else 0)
+
+    def step(self, sample: MarginSample) -> MarginStatus:
+        c = self.config
+        state = np.asarray(sample.state, dtype=float)
+        ended = self.legs.update(sample)
+        if ended is not None:
+            self.misses += ended > self.leg_margin
+        if self.legs.new_leg:
+            if self.current is not None:
+                self.data.append(self.current)
+            self.current = _LegData(self.features.size, self.n, self.d, len(self.cells))
+        raised = self._learn(state, sample)
+        if self.legs.new_leg:
+            self._fit(sample.t, state)
+            self._new_tube(sample)
+            self.leg_margin = self._margin()
+            self.flagged = False
+        elif sample.t - self.last_fit >= c.evaluation_period - 1e-9 and self.current is not None:
+            self._fit(sample.t, state)
+            self.model_margin = self._model_margin()
+        elif raised:
+            self.model_margin = self._model_margin()
+        t = self.legs
+        violation = t.leg is not None and t.leg_max > self.leg_margin and not self.flagged
+        self.flagged |= violation
+        return MarginStatus(self.mode, max(self._margin(), t.leg_max), self.leg_margin,
+                            self.bank.level * c.prior_bound, c.confidence, self.samples,
+                            self.misses + self.flagged, t.d_rob, t.d_rob_max, violation,
+                            self.bank.violations)
+
+    # ------------------------------------------------------------------ learning
+    def _learn(self, state: np.ndarray, sample: MarginSample) -> bool:
+        """Account the pair (x̄_{k−1}, u_{k−1}) → x̄_k; True when its residual raised the bank.
+
+        The pair is taken in the frame of the leg that issued u_{k−1} (``sample.leg``); the
+        residual is attributed to p_{k−1}, where it acted.
+        """
+        prev, self._previous = self._previous, state.copy()
+        leg = sample.leg
+        if prev is None or leg is None or leg.d0 <= 0.0 or sample.applied is None \
+                or self.current is None:
+            return False
+        if sample.probing is not None:
+            self.current.add_probing(np.asarray(sample.probing, dtype=float))
+        xr = np.zeros(self.n)
+        if self.config.frame is ModelFrame.LEG_TARGET:
+            xr[:2] = np.asarray(leg.target, dtype=float)[:2]
+        z = np.concatenate([prev - xr, np.asarray(sample.applied, dtype=float)])
+        y = state - xr
+        self.current.stats.add(self.features(prev[:2]), y, z)
+        self._visit(prev[:2])
+        if self.theta is None:
+            return False
+        excess = np.abs(y - self.theta @ z) - self.config.noise_allowance * self.sigma
+        return self.bank.observe(float((excess / self._prior_residual).max()))
+
+    def _visit(self, p: np.ndarray) -> None:
+        (x0, _), (y0, _) = self.config.region
+        ij = np.rint([(p[0] - x0) / self.config.cell, (p[1] - y0) / self.config.cell]).astype(int)
+        idx = ij[None] + self._stencil
+        ok = (idx[:, 0] >= 0) & (idx[:, 0] < self._nx) & (idx[:, 1] >= 0) & (idx[:, 1] < self._ny)
+        assert self.current is not None
+        self.current.visited[idx[ok, 0] * self._ny + idx[ok, 1]] = True
+
+    def _fit(self, t: float, state: np.ndarray) -> None:
+        """Fit model and field on the window; the bank follows the band near the robot."""
+        self.last_fit = t
+        blocks = [b for b in (*self.data, self.current) if b is not None and b.count]
+        if sum(b.count for b in blocks) <= self.d:
+            return
+        stats = blocks[0].stats
+        for b in blocks[1:]:
+            stats = stats + b.stats
+        c = self.config
+        fit = fit_field(stats, c.ridge, self._delta, 0.0, c.noise_floor, model_prior=self._prior)
+        # S_c, the norm of the true weights, is an assumption the data cannot check
+        # (docs/margins.md): the fitted norm, at least the prior bound, times a factor.
+        # (The fitted norm alone fails early: on one leg the model soaks up the field.)
+        s = np.maximum(np.linalg.norm(fit.weights, axis=0), self._prior_residual)
+        fit = fit.with_weight_bound(c.weight_bound * s)
+        self.fit, self.theta, self.sigma = fit, fit.model, fit.sigma
+        reach = 2.0 * max([d0 for d0 in self._leg_lengths()] + [c.feature_spacing])
+        near = np.hypot(*(self.cells - state[:2]).T) <= reach
+        region = near & np.logical_or.reduce([b.visited for b in blocks])
+        idx = np.flatnonzero(region)
+        supported = math.sqrt(c.ridge) * fit.spread(self._cell_phi[idx]) <= c.support
+        self.region = np.zeros_like(region)
+        self.region[idx[supported]] = True
+        if not self.region.any():
+            return
+        mean, half = fit.band(self._cell_phi[self.region])
+        # The level is in units of the prior bound: |d_i| <= level R_i for every component.
+        self.bank.evaluate(float(((np.abs(mean) + half) / self._prior_residual).max()))
+
+    def _leg_lengths(self) -> list[float]:
+        return [float(np.linalg.norm(s[:2] - g)) for _, s, g in
+                self.legs.started[-(self.config.window + 1):]]
+
+    # ------------------------------------------------------------------ margin
+    def _new_tube(self, sample: MarginSample) -> None:
+        """Tube and nominal deviations of the closed loop the controller runs now."""
+        if sample.gain is None or sample.horizon <= 0.0 or self.theta is None:
+            self.tube = None
+            return
+        # A leg lasts at most the horizon; the tube runs as long as the window's longest leg
+        # (the horizon until a leg has ended), and a longer leg raises the margin as it goes.
+        steps = max(int(round(sample.horizon / self.config.dt)), 1)
+        recent = self.legs.durations[-self.config.window:]
+        if recent:
+            steps = min(steps, max(max(recent), 1))
+        taus = sample.horizon - self.config.dt * np.arange(steps)
+        gains = np.stack([np.asarray(sample.gain(float(tau)), dtype=float) for tau in taus])
+        phi, gamma = self.theta[:, :self.n], self.theta[:, self.n:]
+        offset = np.zeros((self.n, 2))
+        if self.config.frame is ModelFrame.WORLD_ORIGIN:
+            offset = (phi - np.eye(self.n))[:, :2]
+        self.tube = tube_gains(phi, gamma, gains, self._prior_residual, self.config.directions)
+        # The probing of the last finished leg: it decays from leg to leg.
+        source = self.data[-1] if self.data else self.current
+        std, corr = source.probing_statistics(self.m) if source is not None else (0.0, 0.0)
+        self.spread = random_deviation(phi, gamma, gains, self.sigma, std, corr)
+        starts = self.legs.started[-self.config.recent_legs:]
+        self.nominal = float(nominal_deviation(
+            phi, gamma, offset, gains, np.array([s for _, s, _ in starts]),
+            np.array([g for _, _, g in starts])).max())
+        self.model_margin = self._model_margin()
+
+    def _model_margin(self) -> float:
+        if self.tube is None or self.spread is None or math.isinf(self.bank.level):
+            return math.inf
+        # The random part must hold over the whole leg: a union bound over its steps.
+        z = float(norm.ppf(1.0 - 0.5 * self._delta / len(self.tube)))
+        return self.nominal + tube_margin(self.tube, self.bank.level, self.spread, z)
+
+    def _fallback(self) -> float:
+        return self.legs.d_rob_max if self.initial_margin is None else self.initial_margin
+
+    def _margin(self) -> float:
+        return self._fallback() if math.isinf(self.model_margin) else self.model_margin

@@ -1,0 +1,116 @@
+"""The bank of bounds (Alg. 1's rules) and the closed-loop tube against direct simulation."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rrtq_planner.margins.bank import BoundBank
+from rrtq_planner.margins.tube import (closed_loop, nominal_deviation, random_deviation,
+                                       tube_gains)
+from rrtq_sim.plant import Plant, rover_matrices
+from rrtq_sim.riccati import solve_riccati
+
+
+def test_bank_steps_down_only_when_the_band_allows_and_up_at_once():
+    rng = np.random.default_rng(0)
+    bank = BoundBank(0.8)
+    assert bank.level == math.inf
+    for _ in range(2000):
+        before = bank.level
+        if rng.random() < 0.3:
+            sup = float(rng.lognormal(0.0, 1.0))
+            bank.evaluate(sup)
+            # The new level is a ladder level at least the band's supremum, the lowest one.
+            assert bank.level >= sup and bank.level * 0.8 < sup
+            i = math.log(bank.level) / math.log(0.8)
+            assert abs(i - round(i)) < 1e-9
+        else:
+            residual = float(rng.lognormal(0.0, 1.0))
+            raised = bank.observe(residual)
+            assert raised == (residual > before)
+            # A residual never lowers the level; one above it lifts it over the residual.
+            assert bank.level >= before if not raised else bank.level >= residual
+            if not raised:
+                assert bank.level == before
+    assert bank.ceil(0.0) == 0.0 and bank.ceil(math.inf) == math.inf
+
+
+def _loop():
+    """The rover without a spring under the finite-horizon Riccati gain of a 10 s leg."""
+    a, b = rover_matrices(40.0, 0.0, 45.0)
+    dt, horizon = 0.05, 10.0
+    plant = Plant(a, b, None, dt, 1e9)
+    ric = solve_riccati(a, b, 10.0 * np.eye(4), 0.02 * np.eye(2), 0.5 * np.eye(4), horizon)
+    taus = horizon - dt * np.arange(int(horizon / dt))
+    gains = np.stack([50.0 * b.T @ ric.P(t) for t in taus])        # R⁻¹BᵀP(τ)
+    return plant, gains
+
+
+def test_tube_is_attained_by_the_worst_sequence_and_never_exceeded():
+    plant, gains = _loop()
+    shape = np.array([1e-4, 1e-4, 5e-3, 5e-3])
+    tube = tube_gains(plant.phi, plant.gamma_u, gains, shape)
+    a = closed_loop(plant.phi, plant.gamma_u, gains)
+    # Ψ(k, j+1) by direct products, independent of the tube's recursion.
+    k = 60
+    c = np.array([math.cos(0.3), math.sin(0.3)])
+    psi = [np.eye(4)]
+    for j in range(k - 1, 0, -1):          # Ψ(k, j) = Ψ(k, j+1) A_j
+        psi.insert(0, psi[0] @ a[j])
+    # The sequence d_j = s ∘ sign(cᵀPΨ(k, j+1)), simulated step by step from rest.
+    x = np.zeros(4)
+    for j in range(k):
+        x = a[j] @ x + shape * np.sign(c @ psi[j][:2])
+    attained = abs(c @ x[:2])
+    assert attained == pytest.approx(sum((np.abs(c @ p[:2]) * shape).sum() for p in psi))
+    # Over all directions (fine grid) the worst sequence stays under the tube, and the
+    # tube is within the direction-grid factor of it.
+    angles = np.linspace(0, math.pi, 721)
+    worst = max(sum((np.abs(np.array([math.cos(t), math.sin(t)]) @ p[:2]) * shape).sum()
+                    for p in psi) for t in angles)
+    assert worst <= tube[k - 1] <= worst / math.cos(math.pi / 32) + 1e-12
+    # 500 random sequences within the box: every step, every direction, under the tube.
+    rng = np.random.default_rng(1)
+    d = shape * rng.uniform(-1, 1, (500, len(gains), 4))
+    x = np.zeros((500, 4))
+    for j in range(len(gains)):
+        x = x @ a[j].T + d[:, j]
+        assert np.linalg.norm(x[:, :2], axis=1).max() <= tube[j] + 1e-12
+
+
+def test_random_deviation_matches_monte_carlo():
+    plant, gains = _loop()
+    noise = np.array([1e-4, 1e-4, 2e-3, 2e-3])
+    probing, rho = 5.0, 0.95
+    spread = random_deviation(plant.phi, plant.gamma_u, gains, noise, probing, rho)
+    a = closed_loop(plant.phi, plant.gamma_u, gains)
+    rng = np.random.default_rng(2)
+    runs = 4000
+    p = probing * rng.standard_normal((runs, 2))
+    x = np.zeros((runs, 4))
+    ys = []
+    for j in range(len(gains)):
+        x = x @ a[j].T + p @ plant.gamma_u.T + noise * rng.standard_normal((runs, 4))
+        p = rho * p + math.sqrt(1 - rho**2) * probing * rng.standard_normal((runs, 2))
+        ys.append(x[:, 1].std())
+    # The y axis is one direction: its spread is the worst direction's for this isotropic loop.
+    np.testing.assert_allclose(ys, spread, rtol=0.06)
+
+
+def test_nominal_deviation_is_the_simulated_deviation_from_the_leg_line():
+    plant, gains = _loop()
+    start = np.array([0.0, 0.0, 0.2, 0.5])          # moving sideways at the leg start
+    target = np.array([4.0, 0.0])
+    dev = nominal_deviation(plant.phi, plant.gamma_u, np.zeros((4, 2)), gains, start[None],
+                            target[None])
+    x = start.copy()
+    worst = 0.0
+    for k in range(len(gains)):
+        xbar = x - np.concatenate([target, np.zeros(2)])
+        x = plant.step(x, -gains[k] @ xbar, None, np.zeros(2))
+        worst = max(worst, abs(x[1]))
+    assert dev[0] == pytest.approx(worst, rel=1e-9)
+    assert worst > 0.05
