@@ -251,7 +251,7 @@ def figure(example, path: Path) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(2, 1, figsize=(10, 7), sharey=True)
-    for ax, (run, legs, title) in zip(axes, ((example[0], example[1], 'first mission'),
+    for ax, (run, _legs, title) in zip(axes, ((example[0], example[1], 'first mission'),
                                              (example[2], example[3],
                                               'second mission, conformal calibrated by the first'))):
         ax.plot(run['t'], run['d_rob'], color='0.6', lw=0.8, label='D_rob (realised)')

@@ -13,21 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from rrtq_bringup.bench_table import COMPLETED
+from rrtq_bringup.bench_table import COMPLETED, cell, num, pct
 
 __all__ = ['sweep_markdown', 'sweep_plot']
-
-
-def _num(value: float | None, digits: int) -> str:
-    return '—' if value is None else f'{value:.{digits}f}'
-
-
-def _pct(value: float | None) -> str:
-    return '—' if value is None else f'{100.0 * value:.0f} %'
-
-
-def _cell(text: str) -> str:
-    return text.replace('|', '\\|').replace('\n', ' ')
 
 
 def sweep_markdown(table: dict[str, Any]) -> str:
@@ -45,14 +33,14 @@ def sweep_markdown(table: dict[str, Any]) -> str:
     for conf in table['configurations']:
         s = conf['stats']
         ci = s['success_rate_ci95']
-        ci_text = f' ({_pct(ci[0])}–{_pct(ci[1])})' if ci else ''
+        ci_text = f' ({pct(ci[0])}–{pct(ci[1])})' if ci else ''
         lines.append(
-            f"| {_cell(conf['label'])} | {s['completed']} of {s['runs']} | "
-            f"{_pct(s['success_rate'])}{ci_text} | {s['collisions']} | "
-            f"{_num(s['time_to_goal_s']['median'], 1)} | "
-            f"{_num(s['path_over_optimum']['median'], 3)} / "
-            f"{_num(s['path_over_optimum']['p95'], 3)} | "
-            f"{_num(s['controller_step_ms']['median'], 2)} | {_num(s['replans']['median'], 1)} |")
+            f"| {cell(conf['label'])} | {s['completed']} of {s['runs']} | "
+            f"{pct(s['success_rate'])}{ci_text} | {s['collisions']} | "
+            f"{num(s['time_to_goal_s']['median'], 1)} | "
+            f"{num(s['path_over_optimum']['median'], 3)} / "
+            f"{num(s['path_over_optimum']['p95'], 3)} | "
+            f"{num(s['controller_step_ms']['median'], 2)} | {num(s['replans']['median'], 1)} |")
     if table.get('interrupted'):
         lines += ['', f"**Interrupted** ({table['interrupted']}): the table covers the runs "
                   'that completed.']
@@ -61,19 +49,19 @@ def sweep_markdown(table: dict[str, Any]) -> str:
     if failed:
         lines += ['', 'Failed missions:', '', '| configuration | seed | outcome | reason |',
                   '|---|---|---|---|']
-        lines += [f'| {_cell(c)} | {s} | {o} | {_cell(r)} |' for c, s, o, r in failed]
+        lines += [f'| {cell(c)} | {s} | {o} | {cell(r)} |' for c, s, o, r in failed]
     incomplete = [(conf['label'], f['seed'], f['reason'])
                   for conf in table['configurations'] for f in conf['stats']['incomplete']]
     if incomplete:
         lines += ['', 'Runs that did not complete:', '', '| configuration | seed | reason |',
                   '|---|---|---|']
-        lines += [f'| {_cell(c)} | {s} | {_cell(r)} |' for c, s, r in incomplete]
+        lines += [f'| {cell(c)} | {s} | {cell(r)} |' for c, s, r in incomplete]
     retried = [(conf['label'], r['seed'], r['retried_after'])
                for conf in table['configurations'] for r in conf['runs'] if r.get('retried_after')]
     if retried:
         lines += ['', 'Runs retried once after a failure on the engine:', '',
                   '| configuration | seed | first attempt |', '|---|---|---|']
-        lines += [f'| {_cell(c)} | {s} | {_cell(why)} |' for c, s, why in retried]
+        lines += [f'| {cell(c)} | {s} | {cell(why)} |' for c, s, why in retried]
     return '\n'.join(lines) + '\n'
 
 

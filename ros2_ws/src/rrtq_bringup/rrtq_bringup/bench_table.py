@@ -111,15 +111,15 @@ def machine(repo: pathlib.Path) -> dict[str, Any]:
             'commit': commit}
 
 
-def _num(value: float | None, digits: int = 2) -> str:
+def num(value: float | None, digits: int = 2) -> str:
     return '—' if value is None else f'{value:.{digits}f}'
 
 
-def _pct(value: float | None) -> str:
+def pct(value: float | None) -> str:
     return '—' if value is None else f'{100.0 * value:.0f} %'
 
 
-def _cell(text: str) -> str:
+def cell(text: str) -> str:
     return text.replace('|', '\\|').replace('\n', ' ')
 
 
@@ -128,25 +128,25 @@ def markdown(table: dict[str, Any]) -> str:
     info, s = table['machine'], table['stats']
     engine = table.get('engine', f"local, {table['workers']} workers")
     ci = s['success_rate_ci95']
-    ci_text = f' (95 % CI {_pct(ci[0])}–{_pct(ci[1])})' if ci else ''
+    ci_text = f' (95 % CI {pct(ci[0])}–{pct(ci[1])})' if ci else ''
     rows = [
         ('runs completed', f"{s['completed']} of {s['runs']} (seeds {table['seeds']})"),
-        ('success rate', f"{_pct(s['success_rate'])}{ci_text}"),
-        ('collision rate', _pct(s['collision_rate'])),
+        ('success rate', f"{pct(s['success_rate'])}{ci_text}"),
+        ('collision rate', pct(s['collision_rate'])),
         ('outcomes', ', '.join(f'{k} {v}' for k, v in sorted(s['outcomes'].items())) or '—'),
         ('time to goal, s (median / p95)',
-         f"{_num(s['time_to_goal_s']['median'], 1)} / {_num(s['time_to_goal_s']['p95'], 1)}"),
+         f"{num(s['time_to_goal_s']['median'], 1)} / {num(s['time_to_goal_s']['p95'], 1)}"),
         ('path length / optimum (median / p95)',
-         f"{_num(s['path_over_optimum']['median'], 3)} / "
-         f"{_num(s['path_over_optimum']['p95'], 3)}"),
-        ('replans per run (median)', _num(s['replans']['median'], 1)),
+         f"{num(s['path_over_optimum']['median'], 3)} / "
+         f"{num(s['path_over_optimum']['p95'], 3)}"),
+        ('replans per run (median)', num(s['replans']['median'], 1)),
         ('replan latency, ms (median of medians / p95 of p95s)',
-         f"{_num(s['replan_ms']['median'], 1)} / {_num(s['replan_ms']['p95'], 1)}"),
+         f"{num(s['replan_ms']['median'], 1)} / {num(s['replan_ms']['p95'], 1)}"),
         ('controller step, ms (median of medians / p95 of p95s)',
-         f"{_num(s['controller_step_ms']['median'])} / {_num(s['controller_step_ms']['p95'])}"),
-        ('sim speed-up, sim s per wall s (median)', _num(s['sim_speedup']['median'], 2)),
-        ('wall time', f"{_num(table['wall_s'] / 60.0, 1)} min, engine {engine} "
-                      f"(median run {_num(s['run_wall_s']['median'], 0)} s)"),
+         f"{num(s['controller_step_ms']['median'])} / {num(s['controller_step_ms']['p95'])}"),
+        ('sim speed-up, sim s per wall s (median)', num(s['sim_speedup']['median'], 2)),
+        ('wall time', f"{num(table['wall_s'] / 60.0, 1)} min, engine {engine} "
+                      f"(median run {num(s['run_wall_s']['median'], 0)} s)"),
     ]
     lines = [f"_{info['date']}, {info['cpu']} ({info['cores']} cores), Python {info['python']}, "
              f"commit {info['commit']}_", '',
@@ -159,14 +159,14 @@ def markdown(table: dict[str, Any]) -> str:
                   'that completed.']
     if s['mission_failures']:
         lines += ['', 'Failed missions:', '', '| seed | outcome | reason |', '|---|---|---|']
-        lines += [f"| {f['seed']} | {f['outcome']} | {_cell(f['reason'])} |"
+        lines += [f"| {f['seed']} | {f['outcome']} | {cell(f['reason'])} |"
                   for f in s['mission_failures']]
     if s['incomplete']:
         lines += ['', 'Runs that did not complete:', '', '| seed | reason |', '|---|---|']
-        lines += [f"| {f['seed']} | {_cell(f['reason'])} |" for f in s['incomplete']]
+        lines += [f"| {f['seed']} | {cell(f['reason'])} |" for f in s['incomplete']]
     retried = [r for r in table['runs'] if r.get('retried_after')]
     if retried:
         lines += ['', 'Runs retried once after a failure on the engine:', '',
                   '| seed | first attempt |', '|---|---|']
-        lines += [f"| {r['seed']} | {_cell(r['retried_after'])} |" for r in retried]
+        lines += [f"| {r['seed']} | {cell(r['retried_after'])} |" for r in retried]
     return '\n'.join(lines) + '\n'

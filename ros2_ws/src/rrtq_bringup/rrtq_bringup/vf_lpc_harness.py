@@ -1,9 +1,9 @@
 """Offline closed loop of VF-LPC (no ROS): RRT^X path -> guidance -> vf_lpc -> exact plant.
 
 For fast tests and the model-mismatch study. The plant is :class:`rrtq_sim.plant.Plant`
-(exact zero-order hold), optionally with acceleration bumps where the robot passes:
-``d(p) = value * (1 - |p - c|²/r²)²`` inside the disc (c, r), 0 outside, applied
-through ``F = [0 0; 0 0; 1 0; 0 1]`` (m/s²). The controller sees only the identified
+(exact zero-order hold), optionally with acceleration bumps where the robot passes: the
+disturbance field of :mod:`rrtq_sim.field` (the ``disturbance: field`` model), applied
+through its input matrix E = [0; I] (m/s²). The controller sees only the identified
 model, its own observations and the augmented obstacles.
 """
 
@@ -20,38 +20,18 @@ from rrtq_common.polygon_set import PolygonSet
 from rrtq_planner import routes
 from rrtq_planner.guidance import GuidanceConfig, GuidanceTrack
 from rrtq_planner.shortcut import Shortener
+from rrtq_sim.field import Bump, DisturbanceField, field_input_matrix
 from rrtq_sim.plant import Plant, rover_matrices
 
-__all__ = ['Bump', 'HarnessResult', 'bump_field', 'identify_by_probing', 'plan_path', 'rover_plant',
+__all__ = ['Bump', 'HarnessResult', 'identify_by_probing', 'plan_path', 'rover_plant',
            'run_closed_loop']
-
-ACCELERATION_F = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
-
-
-@dataclass(frozen=True)
-class Bump:
-    """An acceleration bump: ``value`` (m/s², 2) at the centre, 0 beyond ``radius`` (m)."""
-
-    center: tuple[float, float]
-    radius: float
-    value: tuple[float, float]
-
-
-def bump_field(position: np.ndarray, bumps: Sequence[Bump]) -> np.ndarray:
-    """d(p), m/s² (2,)."""
-    d = np.zeros(2)
-    for b in bumps:
-        s = float(np.sum((position - np.asarray(b.center)) ** 2)) / b.radius ** 2
-        if s < 1.0:
-            d += (1.0 - s) ** 2 * np.asarray(b.value)
-    return d
 
 
 def rover_plant(mass: float, damping: float = 45.0, dt: float = 0.05,
                 force_limit: float = 1000.0) -> Plant:
     """The rover without a spring (the controller does all the work)."""
     a, b = rover_matrices(mass, 0.0, damping)
-    return Plant(a, b, ACCELERATION_F, dt, force_limit)
+    return Plant(a, b, field_input_matrix(4), dt, force_limit)
 
 
 def identify_by_probing(plant: Plant, rng: np.random.Generator, seconds: float = 30.0,
@@ -118,6 +98,7 @@ def run_closed_loop(plant: Plant, model: KoopmanModel, truth: Sequence[npt.Array
     true_polys = [np.asarray(p, dtype=float) for p in truth]
     augmented = routes.grow(true_polys, robot_radius + margin)
     referee = PolygonSet(true_polys)
+    field = DisturbanceField(bumps)
     start, goal = np.asarray(start, dtype=float), np.asarray(goal, dtype=float)
     path = plan_path(augmented, start, goal, bounds, iterations, seed)
     track = GuidanceTrack(path, augmented, guidance)
@@ -138,7 +119,7 @@ def run_closed_loop(plant: Plant, model: KoopmanModel, truth: Sequence[npt.Array
         rec['ms'].append((clock() - t0) * 1e3 if clock else 0.0)
         mean_nom = ctrl.nominal(x, u)
         mean, var = ctrl.predict(x, u)
-        x_next = plant.step(x, u, bump_field(x[:2], bumps), np.zeros(2))
+        x_next = plant.step(x, u, field.acceleration(x[:2]), np.zeros(2))
         ctrl.observe(x, u, x_next)
         rec['p'].append(x[:2].copy())
         rec['u'].append(u)

@@ -1,7 +1,8 @@
 """`rrtq identify` on a real recording: the fitted model against the rover's true ZOH matrices.
 
 The recording is made by `scripts/rrtq run` (composed, lock-step) of an open-loop probing
-scenario; the truth is scipy's expm of the scenario's continuous rover model.
+scenario; the truth is the zero-order hold (scipy's expm) of the scenario's continuous rover
+model, as :mod:`rrtq_testing.controller_reference` writes it apart from the simulator.
 """
 
 import json
@@ -12,11 +13,10 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.writer import Writer
-from scipy.linalg import expm
 
 from rrtq_bringup import identify
 from rrtq_controller.vf_lpc import KoopmanModel
-from rrtq_sim.plant import rover_matrices
+from rrtq_testing import controller_reference as ref
 
 ROOT = pathlib.Path(__file__).resolve().parents[4]
 MASS, DAMPING = 40.0, 45.0
@@ -66,11 +66,10 @@ def test_identified_model_is_the_true_zero_order_hold(recording, tmp_path):
     code, stdout, stderr = cli(recording, '-o', out, '--holdout', '0.25')
     assert code == 0, stderr
     report = json.loads(stdout)
-    a, b = rover_matrices(MASS, 0.0, DAMPING)
-    e = expm(np.block([[a, b], [np.zeros((2, 6))]]) * 0.05)
+    phi, gamma = ref.zoh(*ref.rover(MASS, 0.0, DAMPING), 0.05)
     model = KoopmanModel.load(out)
-    assert np.allclose(model.A, e[:4, :4], atol=1e-6)
-    assert np.allclose(model.B, e[:4, 4:], atol=1e-8)
+    assert np.allclose(model.A, phi, atol=1e-6)
+    assert np.allclose(model.B, gamma, atol=1e-8)
     assert report['held_out'] == report['samples'] - report['fitted_on'] > 0
     assert max(report['holdout_one_step_rmse']) < 1e-6
     assert report['open_loop_horizon_s'] == 2.0 and report['holdout_open_loop_windows'] > 0

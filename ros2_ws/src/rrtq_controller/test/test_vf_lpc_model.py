@@ -7,22 +7,16 @@ numpy on the same data.
 
 import numpy as np
 import pytest
-from scipy.linalg import expm
 
 from rrtq_controller.vf_lpc import (LIFTINGS, KoopmanModel, OnlineSparseGP, SparseGPConfig,
                                     fit_edmd)
+from rrtq_testing import controller_reference as ref
 
 DT = 0.05
 
 
 def rover_zoh(mass, damping=45.0):
-    a = np.zeros((4, 4))
-    a[0, 2] = a[1, 3] = 1.0
-    a[2, 2] = a[3, 3] = -damping / mass
-    b = np.zeros((4, 2))
-    b[2, 0] = b[3, 1] = 1.0 / mass
-    e = expm(np.block([[a, b], [np.zeros((2, 6))]]) * DT)
-    return e[:4, :4], e[:4, 4:]
+    return ref.zoh(*ref.rover(mass, 0.0, damping), DT)
 
 
 def probe(phi, gamma, steps, rng, offset=None):

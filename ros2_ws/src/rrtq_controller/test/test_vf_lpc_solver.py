@@ -7,25 +7,21 @@ terminal weight is that solution has the same first input), and the referee's di
 
 import numpy as np
 import pytest
-from scipy.linalg import expm, solve_discrete_are
+from scipy.linalg import solve_discrete_are
 from scipy.optimize import minimize
 
 from rrtq_controller.vf_lpc import KoopmanModel, LIFTINGS, LPCConfig, VFLPCController
 from rrtq_controller.vf_lpc.lpc import box_qp
 from rrtq_common.geometry import polygon_from_circle
 from rrtq_common.polygon_set import PolygonSet
+from rrtq_testing import controller_reference as ref
 
 DT = 0.05
 
 
 def rover_model(mass=40.0, damping=45.0):
-    a = np.zeros((4, 4))
-    a[0, 2] = a[1, 3] = 1.0
-    a[2, 2] = a[3, 3] = -damping / mass
-    b = np.zeros((4, 2))
-    b[2, 0] = b[3, 1] = 1.0 / mass
-    e = expm(np.block([[a, b], [np.zeros((2, 6))]]) * DT)
-    return KoopmanModel(e[:4, :4], e[:4, 4:], np.eye(4), DT, LIFTINGS['linear'], 1000.0)
+    phi, gamma = ref.zoh(*ref.rover(mass, 0.0, damping), DT)
+    return KoopmanModel(phi, gamma, np.eye(4), DT, LIFTINGS['linear'], 1000.0)
 
 
 def test_box_qp_matches_lbfgsb():

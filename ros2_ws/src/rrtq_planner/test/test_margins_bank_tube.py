@@ -10,8 +10,7 @@ import pytest
 from rrtq_planner.margins.bank import BoundBank
 from rrtq_planner.margins.tube import (closed_loop, nominal_deviation, random_deviation,
                                        tube_gains)
-from rrtq_sim.plant import Plant, rover_matrices
-from rrtq_sim.riccati import solve_riccati
+from rrtq_testing import controller_reference as ref
 
 
 def test_bank_steps_down_only_when_the_band_allows_and_up_at_once():
@@ -40,20 +39,20 @@ def test_bank_steps_down_only_when_the_band_allows_and_up_at_once():
 
 def _loop():
     """The rover without a spring under the finite-horizon Riccati gain of a 10 s leg."""
-    a, b = rover_matrices(40.0, 0.0, 45.0)
+    a, b = ref.rover(40.0, 0.0, 45.0)
     dt, horizon = 0.05, 10.0
-    plant = Plant(a, b, None, dt, 1e9)
-    ric = solve_riccati(a, b, 10.0 * np.eye(4), 0.02 * np.eye(2), 0.5 * np.eye(4), horizon)
+    plant = ref.Plant(a, b, dt)
+    P = ref.riccati(a, b, 10.0 * np.eye(4), 0.02 * np.eye(2), 0.5 * np.eye(4), horizon)
     taus = horizon - dt * np.arange(int(horizon / dt))
-    gains = np.stack([50.0 * b.T @ ric.P(t) for t in taus])        # R⁻¹BᵀP(τ)
+    gains = np.stack([50.0 * b.T @ P(t) for t in taus])            # R⁻¹BᵀP(τ)
     return plant, gains
 
 
 def test_tube_is_attained_by_the_worst_sequence_and_never_exceeded():
     plant, gains = _loop()
     shape = np.array([1e-4, 1e-4, 5e-3, 5e-3])
-    tube = tube_gains(plant.phi, plant.gamma_u, gains, shape)
-    a = closed_loop(plant.phi, plant.gamma_u, gains)
+    tube = tube_gains(plant.Ad, plant.Gd, gains, shape)
+    a = closed_loop(plant.Ad, plant.Gd, gains)
     # Ψ(k, j+1) by direct products, independent of the tube's recursion.
     k = 60
     c = np.array([math.cos(0.3), math.sin(0.3)])
@@ -85,15 +84,15 @@ def test_random_deviation_matches_monte_carlo():
     plant, gains = _loop()
     noise = np.array([1e-4, 1e-4, 2e-3, 2e-3])
     probing, rho = 5.0, 0.95
-    spread = random_deviation(plant.phi, plant.gamma_u, gains, noise, probing, rho)
-    a = closed_loop(plant.phi, plant.gamma_u, gains)
+    spread = random_deviation(plant.Ad, plant.Gd, gains, noise, probing, rho)
+    a = closed_loop(plant.Ad, plant.Gd, gains)
     rng = np.random.default_rng(2)
     runs = 4000
     p = probing * rng.standard_normal((runs, 2))
     x = np.zeros((runs, 4))
     ys = []
     for j in range(len(gains)):
-        x = x @ a[j].T + p @ plant.gamma_u.T + noise * rng.standard_normal((runs, 4))
+        x = x @ a[j].T + p @ plant.Gd.T + noise * rng.standard_normal((runs, 4))
         p = rho * p + math.sqrt(1 - rho**2) * probing * rng.standard_normal((runs, 2))
         ys.append(x[:, 1].std())
     # The y axis is one direction: its spread is the worst direction's for this isotropic loop.
@@ -104,13 +103,13 @@ def test_nominal_deviation_is_the_simulated_deviation_from_the_leg_line():
     plant, gains = _loop()
     start = np.array([0.0, 0.0, 0.2, 0.5])          # moving sideways at the leg start
     target = np.array([4.0, 0.0])
-    dev = nominal_deviation(plant.phi, plant.gamma_u, np.zeros((4, 2)), gains, start[None],
+    dev = nominal_deviation(plant.Ad, plant.Gd, np.zeros((4, 2)), gains, start[None],
                             target[None])
     x = start.copy()
     worst = 0.0
     for k in range(len(gains)):
         xbar = x - np.concatenate([target, np.zeros(2)])
-        x = plant.step(x, -gains[k] @ xbar, None, np.zeros(2))
+        x = plant.step(x, -gains[k] @ xbar)
         worst = max(worst, abs(x[1]))
     assert dev[0] == pytest.approx(worst, rel=1e-9)
     assert worst > 0.05

@@ -32,10 +32,10 @@ __all__ = ['Bump', 'DisturbanceField', 'bump_profile', 'field_input_matrix',
 
 def bump_profile(s: npt.ArrayLike) -> np.ndarray:
     """b(s) = exp(1 − 1/(1 − s²)) for |s| < 1, else 0: smooth, b(0) = 1, support [−1, 1]."""
-    s = np.abs(np.asarray(s, dtype=float))
-    out = np.zeros_like(s)
-    inside = s < 1.0
-    out[inside] = np.exp(1.0 - 1.0 / (1.0 - s[inside] ** 2))
+    r = np.abs(np.asarray(s, dtype=float))
+    out = np.zeros_like(r)
+    inside = r < 1.0
+    out[inside] = np.exp(1.0 - 1.0 / (1.0 - r[inside] ** 2))
     return out
 
 

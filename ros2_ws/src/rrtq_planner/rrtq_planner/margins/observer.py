@@ -53,12 +53,12 @@ class OneStepModel:
         self.samples = 0
 
     def regressor(self, x_bar: npt.ArrayLike, u: npt.ArrayLike) -> np.ndarray:
-        """z = (x̄, u)."""
+        """The regressor z = (x̄, u)."""
         return np.concatenate([np.asarray(x_bar, float).reshape(-1),
                                np.asarray(u, float).reshape(-1)])
 
     def residual(self, z: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """w = y − Θ̂ z with the current estimate."""
+        """The residual w = y − Θ̂ z with the current estimate."""
         return y - self.theta @ z
 
     def update(self, z: np.ndarray, y: np.ndarray) -> np.ndarray:

@@ -77,8 +77,11 @@ class RBFFeatures:
 
 @dataclasses.dataclass
 class FieldStatistics:
-    """Sufficient statistics of a regression of outputs y (n_out) on φ(p) (p features), and
-    optionally on a model regressor z (d) fitted jointly (the one-step model, :mod:`.learned`)."""
+    """Sufficient statistics of a regression of outputs y (n_out) on φ(p) (p features).
+
+    Optionally also on a model regressor z (d) fitted jointly (the one-step model,
+    :mod:`.learned`).
+    """
 
     gram: np.ndarray
     """Σ φφᵀ, (p, p)."""

@@ -155,6 +155,9 @@ def nominal_deviation(phi: np.ndarray, gamma: np.ndarray, offset: np.ndarray,
 
 def tube_margin(residual_gains: np.ndarray, bound: float, spread: np.ndarray,
                 z: float) -> float:
-    """max_k of r·gain_k + z·std_k, m: the worst-case part for the level r plus z standard
-    deviations of the random part (z of the probability the margin is to hold with)."""
+    """The margin max_k of r·gain_k + z·std_k, m.
+
+    The worst-case part for the level r plus z standard deviations of the random part (z of
+    the probability the margin is to hold with).
+    """
     return float((bound * residual_gains + z * spread).max())

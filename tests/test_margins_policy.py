@@ -16,7 +16,7 @@ from rrtq_planner.margins.calibration import (Calibration, read_calibration,
                                               write_calibration)
 from rrtq_planner.margins.learned import LearnedBoundConfig, LearnedBoundPolicy
 from rrtq_planner.margins.policy import LegInfo, MarginMode, MarginSample, RunningMaxPolicy
-from rrtq_planner.safety import SafetyConfig, SafetyMonitor
+from rrtq_planner.safety import Leg, SafetyConfig, SafetyMonitor
 from rrtq_sim.field import Bump, DisturbanceField, compose_input_matrix
 from rrtq_sim.plant import Plant, rover_matrices
 
@@ -33,11 +33,13 @@ def test_running_max_is_the_safety_monitors_margin_step_for_step():
             leg = LegInfo(k // 97, start, start + rng.normal(0, 3, 2), d0)
         state = np.concatenate([rng.uniform(-12, 12, 2), rng.normal(0, 1, 2)])
         sample = MarginSample(0.05 * k, state, leg if rng.random() > 0.05 else None)
-        if sample.leg is not None and sample.leg.d0 > 0.0:       # the safety node's guard
-            monitor.update(sample.leg.start, sample.leg.target, state[:2])
+        # The safety node's own step (its guard on the leg included), as the node calls it.
+        seen = None if sample.leg is None else Leg(sample.leg.index, tuple(sample.leg.start),
+                                                   tuple(sample.leg.target), sample.leg.d0)
+        node = monitor.step(50_000_000 * k, state[:2], None, seen)
         status = policy.step(sample)
-        assert status.margin == monitor.margin and status.d_rob == monitor.d_rob
-        assert status.d_rob_max == monitor.d_rob_max and status.mode is MarginMode.RUNNING_MAX
+        assert status.margin == node.margin and status.d_rob == node.d_rob
+        assert status.d_rob_max == node.d_rob_max and status.mode is MarginMode.RUNNING_MAX
 
 
 PD = np.array([[40.0, 0.0, 30.0, 0.0], [0.0, 40.0, 0.0, 30.0]])
