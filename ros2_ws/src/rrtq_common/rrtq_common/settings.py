@@ -178,11 +178,16 @@ def kind_of(cls: type, name: str) -> FieldKind:
     raise TypeError(f'{cls.__name__}.{name}: no ROS parameter kind for {hint!r}')
 
 
-def check(config: Any) -> None:
-    """Raise :class:`SettingError` for the first field whose value is out of its range."""
+def check(config: Any, finite: bool = False) -> None:
+    """Raise :class:`SettingError` for the first field whose value is out of its range.
+
+    With ``finite``, a float field that is nan or infinite is out of range too.
+    """
     for field in dataclasses.fields(config):
         meta = field.metadata.get(META)
         value = getattr(config, field.name)
+        if finite and isinstance(value, float) and not np.isfinite(value):
+            raise SettingError(field.name, f'must be finite, got {value}')
         if meta is None or value is None or (meta.low is None and meta.high is None):
             continue
         for number in np.ravel(np.asarray(value, dtype=float)):

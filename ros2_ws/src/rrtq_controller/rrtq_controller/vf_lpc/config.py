@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from dataclasses import dataclass
 
 from rrtq_common.settings import check, setting
@@ -44,8 +42,4 @@ class LPCConfig:
                                '(eqs. 18-21); false: the nominal Koopman model alone')
 
     def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, float) and not math.isfinite(value):
-                raise ValueError(f'{f.name} must be finite, got {value!r}')
-        check(self)
+        check(self, finite=True)

@@ -2,9 +2,7 @@
 
 from __future__ import annotations
 
-import dataclasses
 import enum
-import math
 from dataclasses import dataclass
 
 from rrtq_common.settings import check, setting
@@ -83,11 +81,7 @@ class GuidanceConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, 'mode', GuidanceMode(self.mode))
-        for f in dataclasses.fields(self):
-            value = getattr(self, f.name)
-            if isinstance(value, float) and not math.isfinite(value):
-                raise ValueError(f'{f.name} must be finite, got {value!r}')
-        check(self)
+        check(self, finite=True)
         if self.repulsive_offset >= self.reactive_width:
             raise ValueError(f'repulsive_offset ({self.repulsive_offset:g} m) must be below '
                              f'reactive_width ({self.reactive_width:g} m)')

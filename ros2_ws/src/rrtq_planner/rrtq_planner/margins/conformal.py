@@ -23,6 +23,8 @@ from collections.abc import Iterable
 import numpy as np
 import numpy.typing as npt
 
+from rrtq_common.settings import check, setting
+
 __all__ = ['ConformalConfig', 'ConformalQuantile', 'conformal_rank', 'conformal_quantile',
            'minimum_scores', 'aci_miss_rate_bound']
 
@@ -61,22 +63,18 @@ def aci_miss_rate_bound(delta: float, eta: float, legs: int) -> float:
 
 @dataclasses.dataclass(frozen=True)
 class ConformalConfig:
-    """Parameters of the conformal margin."""
+    """Parameters of the conformal margin (each a :func:`rrtq_common.settings.setting`)."""
 
-    confidence: float = 0.95
-    """1 − δ: the probability with which the next leg's score stays under the margin."""
-    window: int = 50
-    """Legs kept: the margin is a quantile of the last ``window`` scores."""
-    adaptation: float = 0.05
-    """η, the step of the adaptive level δ_t per leg; 0 gives the plain form."""
+    confidence: float = setting(0.95, low=0.0, high=1.0, low_open=True, high_open=True,
+                                doc="1 - delta: the probability with which the next leg's "
+                                'score stays under the margin')
+    window: int = setting(50, low=1, doc='legs kept: the margin is a quantile of the last '
+                          'window scores')
+    adaptation: float = setting(0.05, low=0.0, doc='eta, the step of the adaptive level '
+                                'delta_t per leg; 0 gives the plain form')
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.confidence < 1.0:
-            raise ValueError(f'confidence must be in (0, 1), got {self.confidence!r}')
-        if self.window < 1:
-            raise ValueError(f'window must be >= 1 leg, got {self.window!r}')
-        if not (math.isfinite(self.adaptation) and self.adaptation >= 0.0):
-            raise ValueError(f'adaptation must be finite and >= 0, got {self.adaptation!r}')
+        check(self, finite=True)
 
     @property
     def delta(self) -> float:

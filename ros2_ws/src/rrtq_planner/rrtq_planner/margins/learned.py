@@ -26,6 +26,8 @@ from collections import deque
 import numpy as np
 from scipy.stats import norm
 
+from rrtq_common.settings import check, setting
+
 from .bank import BoundBank
 from .policy import LegTracker, MarginMode, MarginSample, MarginStatus
 from .regression import FieldFit, FieldStatistics, RBFFeatures, fit_field
@@ -47,62 +49,62 @@ class ModelFrame(enum.StrEnum):
 
 @dataclasses.dataclass(frozen=True)
 class LearnedBoundConfig:
-    """Parameters of ``learned_bound``."""
+    """Parameters of ``learned_bound`` (each a :func:`rrtq_common.settings.setting`)."""
 
-    region: Bounds
-    """((x_min, x_max), (y_min, y_max)), m: where the field is learned (the scenario's bounds)."""
-    dt: float
-    """Δt, s: the step of the loop (the controller's τ grid over a leg)."""
-    frame: ModelFrame = ModelFrame.LEG_TARGET
-    """Frame of the one-step model: ``plant.spring_anchor`` (either without a spring)."""
-    confidence: float = 0.95
-    """1 − δ of the simultaneous band (and of the noise part of the tube)."""
-    window: int = 50
-    """Legs of residual data the field is fitted on."""
-    feature_spacing: float = 4.0
-    """m: spacing and length scale of the radial basis functions."""
-    ridge: float = 1.0
-    """λ of the regression (the features are of order 1)."""
-    prior_bound: float = 0.5
-    """R, m/s²: the field strength assumed possible before the data say otherwise (Jha's
-    assumption 3.1); per component of the residual R Δt on velocities, R Δt²/2 on positions."""
-    weight_bound: float = 1.5
-    """S_c = this × max(‖ŵ_c‖, R_c): the bound of the field's weight norm the band assumes."""
-    noise_floor: float = 1e-5
-    """Lower bound of the residual noise σ_c, state units per step."""
-    cell: float = 1.0
-    """m: spacing of the cells the band's supremum is taken over."""
-    reach: float = 1.0
-    """m: a cell counts as visited when a residual was taken within this distance."""
-    support: float = 0.3
-    """The band's supremum is taken over the visited cells within twice the longest leg of
-    the window (at least twice ``feature_spacing``) of the robot where the data have cut the
-    band's width to at most this fraction of the prior's (√λ ‖φ‖_{V⁻¹} <= support): where
-    the next legs go and the data say something. Elsewhere the bound is extrapolated, and a
-    residual above it raises it at once (``docs/margins.md`` §3)."""
-    bank_ratio: float = 0.8
-    """Ratio of neighbouring levels of the bank."""
-    noise_allowance: float = 4.0
-    """A residual raises the bank when a component exceeds its bound by this many σ̂_i."""
-    model_prior_precision: float = 1e-6
-    """μ: precision of the model's prior Φ = I, Γ = 0 (negligible against a leg of data)."""
-    evaluation_period: float = 2.0
-    """s between fits within a leg (a fit also ends every leg)."""
-    recent_legs: int = 10
-    """Leg starts (the last ones, the current included) replayed through the current closed
-    loop for the nominal part: how the robot enters its legs now, not during a transient."""
-    directions: int = 16
-    """Directions of a leg's normal the tube is maximised over."""
+    region: Bounds = setting(unit='m', doc="((x_min, x_max), (y_min, y_max)): where the field "
+                             "is learned (the scenario's bounds)")
+    dt: float = setting(unit='s', low=0.0, low_open=True,
+                        doc="the step of the loop (the controller's tau grid over a leg)")
+    frame: ModelFrame = setting(ModelFrame.LEG_TARGET, doc='frame of the one-step model: '
+                                'plant.spring_anchor (either without a spring)')
+    confidence: float = setting(0.95, low=0.0, high=1.0, low_open=True, high_open=True,
+                                doc='1 - delta of the simultaneous band (and of the noise '
+                                'part of the tube)')
+    window: int = setting(50, low=1, doc='legs of residual data the field is fitted on')
+    feature_spacing: float = setting(4.0, unit='m', low=0.0, low_open=True,
+                                     doc='spacing and length scale of the radial basis '
+                                     'functions')
+    ridge: float = setting(1.0, low=0.0, low_open=True,
+                           doc='lambda of the regression (the features are of order 1)')
+    prior_bound: float = setting(
+        0.5, unit='m/s^2', low=0.0, low_open=True,
+        doc='R: the field strength assumed possible before the data say otherwise (Jha\'s '
+        'assumption 3.1); per component of the residual R dt on velocities, R dt^2/2 on '
+        'positions')
+    weight_bound: float = setting(1.5, low=0.0, low_open=True,
+                                  doc="S_c = this x max(|w_c|, R_c): the bound of the field's "
+                                  'weight norm the band assumes')
+    noise_floor: float = setting(1e-5, low=0.0, low_open=True, doc='lower bound of the '
+                                 'residual noise sigma_c, state units per step')
+    cell: float = setting(1.0, unit='m', low=0.0, low_open=True,
+                          doc="spacing of the cells the band's supremum is taken over")
+    reach: float = setting(1.0, unit='m', low=0.0, low_open=True,
+                           doc='a cell counts as visited when a residual was taken within '
+                           'this distance')
+    support: float = setting(
+        0.3, low=0.0, low_open=True,
+        doc="the band's supremum is taken over the visited cells within twice the longest "
+        'leg of the window (at least twice feature_spacing) of the robot where the data have '
+        "cut the band's width to at most this fraction of the prior's: where the next legs "
+        'go and the data say something; elsewhere the bound is extrapolated, and a residual '
+        'above it raises it at once (docs/margins.md, section 3)')
+    bank_ratio: float = setting(0.8, doc='ratio of neighbouring levels of the bank')
+    noise_allowance: float = setting(4.0, doc='a residual raises the bank when a component '
+                                     'exceeds its bound by this many sigma_i')
+    model_prior_precision: float = setting(1e-6, low=0.0, low_open=True,
+                                           doc="mu: precision of the model's prior Phi = I, "
+                                           'Gamma = 0 (negligible against a leg of data)')
+    evaluation_period: float = setting(2.0, unit='s', low=0.0, low_open=True,
+                                       doc='between fits within a leg (a fit also ends every '
+                                       'leg)')
+    recent_legs: int = setting(10, low=1, doc='leg starts (the last ones, the current '
+                               'included) replayed through the current closed loop for the '
+                               'nominal part: how the robot enters its legs now, not during '
+                               'a transient')
+    directions: int = setting(16, doc="directions of a leg's normal the tube is maximised over")
 
     def __post_init__(self) -> None:
-        if not 0.0 < self.confidence < 1.0:
-            raise ValueError(f'confidence must be in (0, 1), got {self.confidence!r}')
-        if self.window < 1 or self.recent_legs < 1 or self.dt <= 0.0 or self.evaluation_period <= 0.0:
-            raise ValueError('need window >= 1, recent_legs >= 1, dt > 0, evaluation_period > 0')
-        for name in ('feature_spacing', 'ridge', 'cell', 'reach', 'support', 'prior_bound', 'weight_bound',
-                     'noise_floor', 'model_prior_precision'):
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f'{name} must be > 0, got {getattr(self, name)!r}')
+        check(self, finite=True)
 
 
 class _LegData:
