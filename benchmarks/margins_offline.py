@@ -108,7 +108,8 @@ def mission(seed: int, waypoints: np.ndarray, calibration: list[float], duration
         times.append(t)
         x_prev = x
         out = driver.step(t, x)
-        # The controller node never commands more than the actuator's limit (DESIGN.md).
+        # The controller is to command no more than the actuator's limit (docs/design.md,
+        # contract additions: controller.force_limit, coming); the study applies it here.
         out = dataclasses.replace(out, u=np.clip(out.u, -FORCE_LIMIT, FORCE_LIMIT))
         x = plant.step(x, out.u, field.acceleration(x), out.leg_target)
         xr = np.concatenate([out.leg_target, np.zeros(2)])

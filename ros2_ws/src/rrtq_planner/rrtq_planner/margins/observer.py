@@ -1,6 +1,6 @@
 """A safety-side one-step model of the robot, learned by recursive least squares.
 
-The safety node does not know the plant (DESIGN.md: its matrices are the simulator's
+The safety node does not know the plant (docs/design.md, Plant: its matrices are the simulator's
 secret) and does not ask the controller; it fits, from what it measures (``/odom``) and what
 was commanded (``/cmd_force``), the linear one-step map
 
