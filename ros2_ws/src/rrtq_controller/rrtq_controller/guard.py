@@ -60,12 +60,15 @@ def trust_step(change: Array, current: Array, floor: float, growth: float) -> fl
 class DivergenceWatch:
     """Declares a leg diverged when the robot runs away from its target.
 
-    A leg from x̄0 (state relative to the target, positions first) diverges when
-    D = ‖x̄‖ > ``distance`` D0 + ``floor`` (the robot is much farther from the target than
-    where it started), or when the speed ‖x̄[2:]‖ exceeds ``speed`` (L + ‖v0‖ T) / T with
-    L = ‖x̄0[:2]‖ the leg's length and v0 = x̄0[2:] its initial velocity, plus ``floor``:
-    a multiple of the speed that covers the leg, and the motion it started with, in one
-    horizon T. It trips at most once per leg.
+    A leg diverges when D = ‖x̄‖ > ``distance`` D0 + ``floor`` (the robot is much farther
+    from its target than the reference start), or when the speed ‖x̄[2:]‖ exceeds
+    ``speed`` (L + ‖v0‖ T) / T + ``floor`` with L = ‖x̄0[:2]‖ the reference leg's length
+    and v0 = x̄0[2:] its initial velocity: a multiple of the speed that covers the leg,
+    and the motion it started with, in one horizon T. The reference (D0, L, v0) is the
+    start of the last leg that began afresh (the first, one after a completed leg or
+    after a revert): legs that a new plan or the horizon restarts keep it, so a robot
+    that runs away cannot escape the watch by the legs it starts on its way. It trips at
+    most once per leg.
     """
 
     distance: float
@@ -76,22 +79,25 @@ class DivergenceWatch:
     speed_bound: float = math.inf
     tripped: bool = False
 
-    def start(self, x0: Array) -> None:
-        """A new leg from x̄0."""
+    def start(self, x0: Array, renew: bool = True) -> None:
+        """A new leg from x̄0; ``renew`` makes it the reference."""
+        self.tripped = False
+        if not renew:
+            return
         self.d0 = float(np.linalg.norm(x0))
         length = float(np.linalg.norm(x0[:2]))
         v0 = float(np.linalg.norm(x0[2:]))
         self.speed_bound = self.speed * (length + v0 * self.horizon) / self.horizon + self.floor
-        self.tripped = False
 
     def check(self, x: Array) -> str:
         """'' while the leg is fine; the criterion it broke, the first time it breaks one."""
         if self.tripped:
             return ''
         d = float(np.linalg.norm(x))
-        if d > self.distance * self.d0 + self.floor:
+        bound = self.distance * self.d0 + self.floor
+        if d > bound:
             self.tripped = True
-            return f'D = {d:.3g} > {self.distance:g} D0 + {self.floor:g} = {self.distance * self.d0 + self.floor:.3g}'
+            return f'D = {d:.3g} > {self.distance:g} D0 + {self.floor:g} = {bound:.3g}'
         v = float(np.linalg.norm(x[2:]))
         if v > self.speed_bound:
             self.tripped = True

@@ -79,6 +79,8 @@ class QLearningController(WeightReadout):
         """The actors' target (control, disturbance): changed only by an adoption or a revert."""
         self._initial = (self._Wa.copy(), self._Wd.copy())
         self._completed: tuple[Array, Array] | None = None
+        self._adopted_since = False
+        """Whether a target was adopted since a leg last completed."""
         """The actors' weights when a leg last entered its window (the revert point)."""
         self._watch = DivergenceWatch(c.divergence_distance, c.divergence_floor,
                                       c.divergence_speed, c.horizon)
@@ -113,10 +115,13 @@ class QLearningController(WeightReadout):
         leg's duration (it ended before its horizon), which is right where legs end only
         at their window or horizon.
         """
+        renew = True   # a fresh divergence reference: first leg, completed leg, a revert
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
             if not ran_out if completed is None else completed:
                 self.completed_leg()
+            else:
+                renew = self._held
             self._full_legs = self._full_legs + 1 if ran_out else 0
             c = self.config
             if (self._full_legs >= c.widen_after_legs and c.widen_powers and not self.widened
@@ -126,7 +131,7 @@ class QLearningController(WeightReadout):
         self.leg_index += 1
         self._t0 = float(t)
         self._prev = None
-        self._watch.start(np.asarray(x0_bar, dtype=float))
+        self._watch.start(np.asarray(x0_bar, dtype=float), renew)
         self._held = False
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
 
@@ -136,6 +141,7 @@ class QLearningController(WeightReadout):
         Its policy becomes the one a diverging leg reverts to.
         """
         self._completed = (self._Wa.copy(), self._Wd.copy())
+        self._adopted_since = False
 
     def time_to_go(self, t: float) -> float:
         """τ = T - (t - t_leg), s, clipped at 0."""
@@ -305,6 +311,7 @@ class QLearningController(WeightReadout):
                                   self.critic.theta, c.ridge)
             if residual <= c.max_fit_residual and self._positive_value(theta, *cand):
                 self._target = (cand[0].copy(), cand[1].copy())
+                self._adopted_since = True
                 self._note(PolicyEvent.ADOPTED, f'step {s:.3g} of the greedy change')
                 return
             s *= 0.5
@@ -314,10 +321,14 @@ class QLearningController(WeightReadout):
     def revert(self, reason: str) -> None:
         """A leg diverged: back to the last policy that completed a leg (or the initial one).
 
-        The actors and their target both jump there and stay for the rest of the leg; the
-        data of the diverged leg stay in the critic's window (they are valid rows for any
-        policy).
+        When nothing was adopted since that policy completed its leg, it is the policy
+        that diverged (in a direction its completed legs never went), and the hold is
+        the initial policy instead. The actors and their target both jump there and stay
+        for the rest of the leg; the data of the diverged leg stay in the critic's
+        window (they are valid rows for any policy).
         """
+        if self._completed is not None and not self._adopted_since:
+            self._completed = None
         event = PolicyEvent.REVERTED if self._completed is not None else PolicyEvent.HOLD
         Wa, Wd = self._completed if self._completed is not None else self._initial
         self._Wa, self._Wd = Wa.copy(), Wd.copy()
