@@ -8,6 +8,7 @@ controller node, the node declares its ROS parameters from it.
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -100,8 +101,13 @@ class ControllerConfig:
                         'integral-reinforcement interval (RRT-QX (17))')
     M: Any = setting(10.0, rows='n', doc='state weight, n x n (or scalar), cost units per '
                      '(state unit)^2')
-    R: Any = setting(2.0, rows='m', doc='control weight, m x m (or scalar), cost units per '
+    R: Any = setting(0.02, rows='m', doc='control weight, m x m (or scalar), cost units per '
                      'N^2; also the fixed Q_uu')
+    """The default is 0.02, not the paper's 2: on a rover without a spring, at R = 2 the
+    finite-horizon optimum itself moves the robot 0.5 m of a 5 m leg in T = 10 s (force
+    is dear), so no leg ever enters its window and a mission never reaches its goal; at
+    0.02 the optimum enters the window of a 5 m leg in 5-8 s for masses of 10-120 kg. The
+    paper's spring does the work where R = 2 (``scenarios/rrtqx_paper.yaml`` sets it)."""
     P_T: Any = setting(0.5, rows='n', doc='terminal Riccati matrix P(T), n x n (or scalar)')
     critic_law: CriticLaw = setting(CriticLaw.LEAST_SQUARES, doc='least_squares | gradient')
     actor_law: ActorLaw = setting(ActorLaw.WHITENED, doc='whitened | gradient')
@@ -169,6 +175,37 @@ class ControllerConfig:
                            'mean diagonal of the normal matrix')
     stability_delta: float = setting(1.0, **_POSITIVE, doc='δ, δ1, δ2 of the stability bounds '
                                      '(RRT-QX (25), ACC Theorem 2): constants of unity order')
+    force_limit: float = setting(math.inf, unit='N', low=0.0, low_open=True, doc="the "
+                                 "actuator's limit per axis (a specification, not the "
+                                 'dynamics): every command is saturated to it; inf: none')
+    """The Bellman rows are formed with the saturated force, the one the actuator applied,
+    so that the off-policy critic stays consistent when the limit binds. The scenario's
+    default is the plant's ``force_limit``."""
+    probing_across: float = setting(1.0, low=0.0, high=1.0, doc='fraction of the probing '
+                                    'standard deviation applied across the leg (the rest '
+                                    'along it); 1: isotropic')
+    max_fit_residual: float = setting(0.3, **_POSITIVE, doc='guard: largest relative residual '
+                                      'of the critic fit for which its proposal is adopted')
+    """√(Σ w e²) / √(Σ w y²) over the Bellman rows (see :func:`critic.fit`); beyond the papers,
+    like every guard setting (:meth:`QLearningController.policy_improvement`)."""
+    value_tolerance: float = setting(0.01, **_POSITIVE, doc="guard: largest negative part of a "
+                                     "policy's value on the stored samples, as a fraction "
+                                     'of the sum of its absolute values')
+    trust_growth: float = setting(1.0, **_POSITIVE, doc='guard: trust region of one adoption, '
+                                  '|dK(τ)| <= trust_growth max(|K(τ)|, K_floor)')
+    """The gain may grow by this factor per adoption (1: double), from a floor set by the
+    probing scale (see :meth:`QLearningController.policy_improvement`); a longer step is
+    shortened to that length."""
+    divergence_distance: float = setting(3.0, **_POSITIVE, doc='guard: a leg diverges when D '
+                                         '> divergence_distance D0 + divergence_floor')
+    divergence_floor: float = setting(1.0, low=0.0, doc='guard: state units (m, m/s) added '
+                                      'to both divergence bounds')
+    """So that a leg that starts at its target (D0 ≈ 0: holding station) is not declared
+    diverged by probing alone."""
+    divergence_speed: float = setting(6.0, **_POSITIVE, doc='guard: a leg also diverges when '
+                                      'the speed exceeds divergence_speed (L + |v0| T) / T '
+                                      '+ divergence_floor (L the leg length, v0 its initial '
+                                      'velocity)')
     forces: tuple[tuple[float, float, float], ...] = setting(
         (), columns=3, doc='open_loop: the force profile, rows [t (s), f_x (N), f_y (N)], '
         'piecewise constant from each t')
@@ -223,3 +260,8 @@ class StepInfo:
     """Disturbance-actor error e_d before the update (robust)."""
     probing: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     """Probing noise added to the control output, N."""
+    policy_event: str = ''
+    """What the guard did this step: '' (nothing), or :class:`guard.PolicyEvent` values
+    joined by ';' (an evaluation at a leg start can both reject and revert)."""
+    policy_reason: str = ''
+    """Why (the check that failed, the divergence criterion), '; '-joined like the events."""

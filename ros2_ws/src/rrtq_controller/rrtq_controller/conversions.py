@@ -22,7 +22,8 @@ def controller_state_msg(stamp: Time, config: ControllerConfig,
                          out: ControlOutput | None) -> ControllerState:
     """/controller/state of one step (``out`` None: the step was refused, zero force)."""
     u = out.u if out is not None else np.zeros(2)
-    state = ControllerState(variant=str(config.variant), command=_floats(u))
+    state = ControllerState(variant=str(config.variant), command=_floats(u),
+                            force_limit=float(config.force_limit))
     if out is not None:
         state.leg_index = out.leg_index
         state.leg_start_time, state.horizon = out.leg_start_time, config.horizon
@@ -37,6 +38,7 @@ def controller_state_msg(stamp: Time, config: ControllerConfig,
         state.actor_weights = _floats(out.actor_weights)
         state.disturbance_weights = _floats(out.disturbance_weights)
         state.critic_error, state.terminal_error = out.critic_error, out.terminal_error
+        state.policy_event, state.policy_reason = out.policy_event, out.policy_reason
     state.header.stamp = stamp
     state.header.frame_id = MAP_FRAME
     return state

@@ -20,6 +20,78 @@ RowBuilder = Callable[..., tuple[Array, Array, Array, Array]]
 """(τ0, x̄0, τ1, x̄1, u, d) batches -> (σ, k, σ_f, k_f), see :func:`bellman.bellman_rows`."""
 
 
+class SampleWindow:
+    """The last ``critic_memory`` Δt samples: time-to-go and state at both ends, held u and d.
+
+    Each sample yields a Bellman row for *any* policy (the off-policy form of e_c1, see
+    :mod:`bellman`), so the window serves the least-squares policy evaluation and the
+    guard's checks of a proposed policy alike.
+    """
+
+    def __init__(self, capacity: int, n: int, m: int, q: int) -> None:
+        C = capacity
+        self._tau0, self._tau1 = np.zeros(C), np.zeros(C)
+        self._x0, self._x1 = np.zeros((C, n)), np.zeros((C, n))
+        self._u, self._d = np.zeros((C, m)), np.zeros((C, q))
+        self.count = 0
+        self._head = 0
+
+    def add_sample(self, tau0: float, x0: Array, tau1: float, x1: Array, u: Array, d: Array) -> None:
+        """Store one Δt: time-to-go and state at both ends, the applied control and disturbance."""
+        i = self._head
+        self._tau0[i], self._tau1[i], self._x0[i], self._x1[i] = tau0, tau1, x0, x1
+        self._u[i], self._d[i] = u, d
+        self._head = (i + 1) % len(self._tau0)
+        self.count = min(self.count + 1, len(self._tau0))
+
+    def samples(self) -> tuple[Array, Array, Array, Array, Array, Array]:
+        """(τ0, x̄0, τ1, x̄1, u, d) of every stored sample (views; not in time order)."""
+        c = self.count
+        return (self._tau0[:c], self._x0[:c], self._tau1[:c], self._x1[:c], self._u[:c], self._d[:c])
+
+
+def _system(rows: RowBuilder, window: SampleWindow) -> tuple[Array, Array, Array]:
+    """Stacked rows S, targets y and row weights w = 1 / (1 + σᵀσ) of the window's samples."""
+    sig, k, sig_f, k_f = rows(*window.samples())
+    S = np.vstack([sig, sig_f])
+    y = -np.concatenate([k, k_f])
+    return S, y, 1.0 / (1.0 + np.einsum('ij,ij->i', S, S))
+
+
+def _relative_residual(S: Array, y: Array, w: Array, theta: Array) -> float:
+    e = S @ theta - y
+    scale = float(np.sqrt(w @ (y * y)))
+    return float(np.sqrt(w @ (e * e))) / scale if scale > 0 else 0.0
+
+
+def fit(rows: RowBuilder, window: SampleWindow, prior: Array, ridge: float) -> tuple[Array, float]:
+    """Least squares over the window's rows for the policy that ``rows`` forms them for.
+
+    ``θ = argmin Σ (σθ + k)² / (1 + σᵀσ) + ε ‖θ - θ_prior‖²`` (rows normalised as in the
+    gradient law; the ridge ε, relative to the mean diagonal of the normal matrix, keeps
+    directions the data do not excite where they were).
+
+    Returns
+    -------
+    tuple
+        θ and the relative residual √(Σ w e²) / √(Σ w y²) of the fit (0 when no data).
+    """
+    if window.count == 0:
+        return prior.copy(), 0.0
+    S, y, w = _system(rows, window)
+    G = S.T @ (w[:, None] * S)
+    eps = ridge * (np.trace(G) / prior.size + 1e-12)
+    theta = np.linalg.solve(G + eps * np.eye(prior.size), S.T @ (w * y) + eps * prior)
+    return theta, _relative_residual(S, y, w, theta)
+
+
+def residual(rows: RowBuilder, window: SampleWindow, theta: Array) -> float:
+    """The relative residual of :func:`fit` for a given θ (0 when no data)."""
+    if window.count == 0:
+        return 0.0
+    return _relative_residual(*_system(rows, window), theta)
+
+
 class GradientCritic:
     """Normalised gradient descent on K1 = ½ e_c1² + ½ e_c2², RRT-QX (22) / ACC (21).
 
@@ -28,11 +100,14 @@ class GradientCritic:
     minus estimate that is gradient *ascent*, so here both rows enter as residuals.
     Each row contracts the error along σ by α_c Δt σᵀσ / (1 + σᵀσ)² <= α_c Δt / 4, so the
     two rows together are stable for α_c Δt < 4 (the paper's α_c = 90, Δt = 0.05 gives 4.5).
+    The sample window is kept for the guard's checks only.
     """
 
-    def __init__(self, theta0: Array, config: ControllerConfig) -> None:
+    def __init__(self, theta0: Array, config: ControllerConfig, n: int, m: int, q: int) -> None:
         self.theta = theta0.astype(float).copy()
         self._gain = config.gains.alpha_c * config.dt
+        self.window = SampleWindow(config.critic_memory, n, m, q)
+        self.residual = 0.0
 
     def update(self, sig: Array, k: Array) -> None:
         """Apply one Euler step of (22) for rows σ (R, K) with errors e = σθ + k."""
@@ -49,45 +124,32 @@ class LeastSquaresCritic:
     the held u, d at both ends of its Δt) yields a valid row for whatever policy the
     actors now hold. Rows of older policies are therefore never mixed in (the trouble of
     a recursive estimator under a moving actor); instead the rows are re-formed for the
-    current actors at every evaluation (policy evaluation; the actor law (23) then does
-    the improvement). Rows are normalised by (1 + σᵀσ)^½ as in the gradient law, and a
-    small ridge pulls towards the previous estimate,
-    ``θ = argmin Σ (σθ + k)² / (1 + σᵀσ) + ε ‖θ - θ_prev‖²``, so that directions the
-    data do not excite (time functions that vanish on the visited τ) stay where they were.
+    current actors at every evaluation (policy evaluation, :func:`fit`; the actor law (23)
+    then does the improvement), with a small ridge toward the previous estimate so that
+    directions the data do not excite (time functions that vanish on the visited τ) stay
+    where they were.
     """
 
     def __init__(self, theta0: Array, config: ControllerConfig, n: int, m: int, q: int) -> None:
         self.theta = theta0.astype(float).copy()
-        C = config.critic_memory
-        self._tau0, self._tau1 = np.zeros(C), np.zeros(C)
-        self._x0, self._x1 = np.zeros((C, n)), np.zeros((C, n))
-        self._u, self._d = np.zeros((C, m)), np.zeros((C, q))
-        self.count = 0
-        self._head = 0
+        self.window = SampleWindow(config.critic_memory, n, m, q)
         self._ridge = config.ridge
+        self.residual = 0.0
+        """Relative residual of the last fit (see :func:`fit`)."""
 
     def add_sample(self, tau0: float, x0: Array, tau1: float, x1: Array, u: Array, d: Array) -> None:
-        """Store one Δt: time-to-go and state at both ends, the held control and disturbance."""
-        i = self._head
-        self._tau0[i], self._tau1[i], self._x0[i], self._x1[i] = tau0, tau1, x0, x1
-        self._u[i], self._d[i] = u, d
-        self._head = (i + 1) % len(self._tau0)
-        self.count = min(self.count + 1, len(self._tau0))
+        """Store one Δt (see :meth:`SampleWindow.add_sample`)."""
+        self.window.add_sample(tau0, x0, tau1, x1, u, d)
+
+    @property
+    def count(self) -> int:
+        """Stored samples."""
+        return self.window.count
 
     def evaluate(self, rows: RowBuilder) -> None:
         """Policy evaluation: solve for θ over all stored samples with the current actors."""
-        if self.count == 0:
-            return
-        c = self.count
-        sig, k, sig_f, k_f = rows(self._tau0[:c], self._x0[:c], self._tau1[:c], self._x1[:c],
-                                  self._u[:c], self._d[:c])
-        S = np.vstack([sig, sig_f])
-        y = -np.concatenate([k, k_f])
-        w = 1.0 / (1.0 + np.einsum('ij,ij->i', S, S))
-        G = S.T @ (w[:, None] * S)
-        eps = self._ridge * (np.trace(G) / self.theta.size + 1e-12)
-        # θ's size is read here: widening the time basis enlarges it
-        self.theta = np.linalg.solve(G + eps * np.eye(self.theta.size), S.T @ (w * y) + eps * self.theta)
+        # θ's size is read in fit: widening the time basis enlarges it
+        self.theta, self.residual = fit(rows, self.window, self.theta, self._ridge)
 
 
 Critic = GradientCritic | LeastSquaresCritic
@@ -96,5 +158,5 @@ Critic = GradientCritic | LeastSquaresCritic
 def make_critic(theta0: Array, config: ControllerConfig, n: int, m: int, q: int) -> Critic:
     """The critic for ``config.critic_law``."""
     if config.critic_law is CriticLaw.GRADIENT:
-        return GradientCritic(theta0, config)
+        return GradientCritic(theta0, config, n, m, q)
     return LeastSquaresCritic(theta0, config, n, m, q)

@@ -48,6 +48,8 @@ class ControlOutput:
     event: str                        # LegEvent value, or 'no_plan'
     time_rates: tuple[float, ...] = ()   # the critic's time basis (learning variants)
     time_powers: tuple[int, ...] = ()
+    policy_event: str = ''               # the guard's events this step (guard.PolicyEvent)
+    policy_reason: str = ''
 
 
 class Watch(enum.Enum):
@@ -167,7 +169,7 @@ class LearningDriver(Driver):
             points = x[None, :2].copy()
         if self.legs.follow_plan(points, x, t):
             assert self.legs.leg is not None
-            self.controller.start_leg(self.legs.x_bar(x), t)
+            self.controller.start_leg(self.legs.x_bar(x), t, completed=False)
 
     def step(self, t: float, x: ArrayLike, d_applied: ArrayLike | None = None) -> ControlOutput:
         x = np.asarray(x, dtype=float)
@@ -176,7 +178,9 @@ class LearningDriver(Driver):
         if event is LegEvent.NO_PLAN:
             return self._output(np.zeros(self.m), x, event.value, t)
         if event is LegEvent.NEW_LEG:
-            c.start_leg(self.legs.x_bar(x), t)
+            c.start_leg(self.legs.x_bar(x), t, completed=self.legs.completed)
+        elif event is LegEvent.GOAL_REACHED:
+            c.completed_leg()
         u = c.step(t, self.legs.x_bar(x),
                    None if d_applied is None else np.asarray(d_applied, dtype=float))
         return self._output(u, x, event.value, t)
@@ -195,7 +199,8 @@ class LearningDriver(Driver):
             critic_weights=c.critic_weights, actor_weights=c.actor_weights,
             disturbance_weights=c.disturbance_weights if c.robust else empty,
             critic_error=float(c.info.e_c1), terminal_error=float(c.info.e_c2), event=event,
-            time_rates=tuple(c.time_basis.rates), time_powers=tuple(c.time_basis.powers))
+            time_rates=tuple(c.time_basis.rates), time_powers=tuple(c.time_basis.powers),
+            policy_event=c.info.policy_event, policy_reason=c.info.policy_reason)
 
 
 class OpenLoopDriver(Driver):

@@ -67,6 +67,9 @@ class LegSequencer:
         self.leg: Leg | None = None
         self._count = -1
         self.goal_reached = False
+        self.completed = False
+        """Whether the last :meth:`update` started a new leg because the previous one
+        entered its window (not a horizon restart, not a new plan)."""
 
     def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> Leg | None:
         """Adopt a new plan; a new leg starts from the current state x at time t (s)."""
@@ -127,9 +130,11 @@ class LegSequencer:
         x = np.asarray(x, dtype=float)
         inside = self.distance(x) <= self.rho * self.leg.d0
         last = self._next >= len(self._waypoints) - 1
+        self.completed = False
         if inside and not last:
             self._next += 1
             self._start(x, t)
+            self.completed = True
             return LegEvent.NEW_LEG
         if inside and last:
             if not self.goal_reached:

@@ -9,32 +9,39 @@ with γ⁻²FᵀP(τ). Here μ(τ) = ξ(τ) = φ(τ) ⊗ I_n with the time basis
 Per step (RRT-QX Algorithm 1, lines 12-16): the critic errors e_c1, e_c2 of the last Δt
 (:mod:`bellman`, which also documents how the integrals are evaluated from the samples and
 the probing-noise correction), the critic law (:mod:`critic`), the actor steps, then the
-control with probing noise. Safeguards, all model-free: Q̂_uu = R, Q̂_ud = 0, Q̂_dd = -γ²I
-are fixed (the cost's own weights); actor steps are normalised; the actors follow the
-critic only while its value kernel is positive definite and roll back otherwise
-(:meth:`QLearningController.policy_evaluation`); the first leg only collects data.
+control with probing noise, saturated to the actuator's limit. Safeguards, all
+model-free: Q̂_uu = R, Q̂_ud = 0, Q̂_dd = -γ²I are fixed (the cost's own weights); actor
+steps are normalised; the first leg only collects data. Beyond the papers (:mod:`guard`):
+the actors follow a *target* that changes only when the critic's proposal passes the
+checks of :meth:`QLearningController.policy_improvement` (a trust region, the fit, a
+positive-definite value of the proposed policy), and a leg that diverges reverts them to
+the last policy that completed a leg.
 """
 
 from __future__ import annotations
+
+from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
 
 from .basis import QuadraticBasis, TimeBasis
-from .config import ActorLaw, ControllerConfig, StepInfo, Variant
 from .bellman import Policy, bellman_rows
-from .critic import LeastSquaresCritic, make_critic
+from .config import ActorLaw, ControllerConfig, StepInfo, Variant
+from .critic import LeastSquaresCritic, fit, make_critic, residual
+from .guard import DivergenceWatch, PolicyEvent, trust_step
+from .probing import Probing
+from .readout import WeightReadout, _features
 from .stability import gain_warnings
 
 Array = NDArray[np.float64]
 
 
-def _features(phi: Array, x: Array) -> Array:
-    """The features z = φ(τ) ⊗ x̄ (what μ(τ)x̄ is with μ = φ ⊗ I_n)."""
-    return (phi[:, None] * x[None, :]).ravel()
+def _pad(W: Array, rows: int) -> Array:
+    return np.vstack([W, np.zeros((rows, W.shape[1]))])
 
 
-class QLearningController:
+class QLearningController(WeightReadout):
     """Actor/critic Q-learning controller for one robot; weights carry from leg to leg.
 
     Parameters
@@ -55,7 +62,6 @@ class QLearningController:
         self.gamma = self.config.gamma if self.robust and self.config.gamma is not None else 0.0
         """Attenuation level γ of the game (0 in the nominal variant: d is empty there)."""
         self.n, self.m, self.q = n, m, (q if self.robust else 0)
-        self._rng = rng
         self.time_basis = TimeBasis(self.config.time_rates, self.config.time_powers, self.config.horizon)
         self.basis = QuadraticBasis(n, m, self.q)
         L, b = self.time_basis.size, self.basis
@@ -68,33 +74,54 @@ class QLearningController:
             self._Wa[:n] = -np.asarray(self.config.initial_gain, dtype=float).reshape(m, n).T
         self._Wd = np.zeros((L * n, self.q))
         self._Rinv = np.linalg.inv(self.config.R)
-        self._safe = (self._Wa.copy(), self._Wd.copy())
+        c = self.config
+        self._target = (self._Wa.copy(), self._Wd.copy())
+        """The actors' target (control, disturbance): changed only by an adoption or a revert."""
+        self._initial = (self._Wa.copy(), self._Wd.copy())
+        self._completed: tuple[Array, Array] | None = None
+        self._adopted_since = False
+        """Whether a target was adopted since a leg last completed."""
+        """The actors' weights when a leg last entered its window (the revert point)."""
+        self._watch = DivergenceWatch(c.divergence_distance, c.divergence_floor,
+                                      c.divergence_speed, c.horizon)
+        self._held = False
+        self._events: list[tuple[PolicyEvent, str]] = []
+        self.event_counts = {e: 0 for e in PolicyEvent}
+        """How often each :class:`guard.PolicyEvent` happened."""
         self.leg_index = -1
         self._t0 = 0.0
         self._prev: tuple[float, Array, Array] | None = None
         self._since_eval = 0
         self.critic_trusted = False
-        """Whether the actors currently follow the critic (see :meth:`policy_evaluation`)."""
+        """Whether the critic's value of the actors' policy is positive (a diagnostic)."""
         self._full_legs = 0
         self.widened = False
         """Whether the time basis was widened by ``widen_powers`` (see :meth:`widen_time_basis`)."""
         self._d_out = np.zeros(self.q)
-        self._noise_u = np.zeros(m)
-        self._noise_d = np.zeros(self.q)
         tc = self.config.probing_correlation
-        self._ou = float(np.exp(-self.config.dt / tc)) if tc > 0 else 0.0
+        self._probing_u = Probing(m, self.config.dt, tc, self.config.probing_across, rng)
+        self._probing_d = Probing(self.q, self.config.dt, tc, 1.0, rng)
+        self._noise_d = np.zeros(self.q)
         self.info = StepInfo()
         self.warnings: list[str] = gain_warnings(self)
 
     # ----------------------------------------------------------------- legs
-    def start_leg(self, x0_bar: Array, t: float) -> None:
+    def start_leg(self, x0_bar: Array, t: float, completed: bool | None = None) -> None:
         """Begin a new finite-horizon problem at time t (s) from x̄0 (RRT-QX Alg. 1, l. 6).
 
         The learned weights are kept: the Q-function depends on x̄, u and τ only.
+        ``completed`` says whether the previous leg ended in its window D <= ρ D0 (then
+        its policy becomes the one a diverging leg reverts to); None infers it from the
+        leg's duration (it ended before its horizon), which is right where legs end only
+        at their window or horizon.
         """
-        del x0_bar  # D0 is the sequencer's business; the critic needs no leg data
+        renew = True   # a fresh divergence reference: first leg, completed leg, a revert
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
+            if not ran_out if completed is None else completed:
+                self.completed_leg()
+            else:
+                renew = self._held
             self._full_legs = self._full_legs + 1 if ran_out else 0
             c = self.config
             if (self._full_legs >= c.widen_after_legs and c.widen_powers and not self.widened
@@ -104,6 +131,17 @@ class QLearningController:
         self.leg_index += 1
         self._t0 = float(t)
         self._prev = None
+        self._watch.start(np.asarray(x0_bar, dtype=float), renew)
+        self._held = False
+        self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
+
+    def completed_leg(self) -> None:
+        """Mark the current leg as completed (it entered its window).
+
+        Its policy becomes the one a diverging leg reverts to.
+        """
+        self._completed = (self._Wa.copy(), self._Wd.copy())
+        self._adopted_since = False
 
     def time_to_go(self, t: float) -> float:
         """τ = T - (t - t_leg), s, clipped at 0."""
@@ -132,7 +170,8 @@ class QLearningController:
         Returns
         -------
         numpy.ndarray
-            The force u to hold over [t, t + Δt), actor output plus probing noise.
+            The force u to hold over [t, t + Δt): actor output plus probing noise,
+            saturated to ±``force_limit``.
         """
         if self.leg_index < 0:
             self.start_leg(x_bar, t)
@@ -143,21 +182,27 @@ class QLearningController:
             measured = d_applied is not None and self.robust
             d_prev = np.asarray(d_applied, dtype=float) if measured else self._d_out
             e_c1, e_c2 = self.critic_update(tau, x, d_prev)
+        reason = self._watch.check(x)
+        if reason:
+            self.revert(reason)
         phi = self.time_basis(tau)  # after the update, which may widen the basis
         e_a = e_d = np.zeros(0)
-        if self.leg_index >= self.config.actor_warmup_legs and self.critic_trusted:
-            e_a = self.actor_update(phi, x)
+        if self.leg_index >= self.config.actor_warmup_legs:
+            e_a = self.actor_update(phi, x, self._target[0])
             if self.robust:
-                e_d = self.disturbance_actor_update(phi, x)
-        noise = self._probe(self._noise_u, self.probing_std)
-        self._noise_u = noise
-        u = self._policy_u(phi, x) + noise
+                e_d = self.disturbance_actor_update(phi, x, self._target[1])
+        noise = self._probing_u.sample(self.probing_std)
+        limit = self.config.force_limit
+        u = np.clip(self._policy_u(phi, x) + noise, -limit, limit)
         if self.robust:
             d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.leg_index
-            self._noise_d = self._probe(self._noise_d, d_std)
+            self._noise_d = self._probing_d.sample(d_std)
             self._d_out = self._policy_d(phi, x) + self._noise_d
-        self._prev = (tau, x, u)
-        self.info = StepInfo(tau=tau, e_c1=e_c1, e_c2=e_c2, e_a=e_a, e_d=e_d, probing=noise)
+        self._prev = (tau, x, u)  # the applied force: the rows stay right when u saturates
+        events, self._events = self._events, []
+        self.info = StepInfo(tau=tau, e_c1=e_c1, e_c2=e_c2, e_a=e_a, e_d=e_d, probing=noise,
+                             policy_event=';'.join(e.value for e, _ in events),
+                             policy_reason='; '.join(r for _, r in events))
         return u
 
     @property
@@ -191,9 +236,8 @@ class QLearningController:
         e_c2 = -float(sig_f[0] @ theta + k_f[0])
         if tau0 <= 0.0:  # the leg's horizon had passed at the start of this Δt
             return e_c1, e_c2
-        if isinstance(self.critic, LeastSquaresCritic):
-            self.critic.add_sample(tau0, x0, tau, x, u_app, d_applied)
-        else:
+        self.critic.window.add_sample(tau0, x0, tau, x, u_app, d_applied)
+        if not isinstance(self.critic, LeastSquaresCritic):
             self.critic.update(np.vstack([sig, sig_f]), np.concatenate([k, k_f]))
         self._since_eval += 1
         if self._since_eval * self.config.dt >= self.config.evaluation_period - 1e-9:
@@ -201,30 +245,100 @@ class QLearningController:
         return e_c1, e_c2
 
     def policy_evaluation(self) -> None:
-        """Re-fit the least-squares critic for the current actors; re-check the critic's trust.
+        """Re-fit the critic for the current actors and let the guard consider its proposal.
 
-        The actors follow the critic only while the value it assigns to their own policy,
-        P̂^π(τ) (see :meth:`policy_value_kernel`), is positive definite on [T/2, T] (where
-        legs, which end at D <= ρ D0, spend their time; near τ = 0 the time basis fits
-        worst): with M >= 0 and P(T) > 0 every policy's value is, so an indefinite kernel
-        means the critic has not yet been identified (e.g. from one leg in one direction)
-        and its greedy gain must not be followed. When the check fails, the actors are
-        rolled back to the last policy that passed it (initially the initial weights).
-        This is model-free; without it a first leg's poor fit could destabilise the loop.
-        The greedy kernel of :meth:`value_kernel` (min over u of Q̂) is not the test: for a
-        poor policy, such as the zero policy on the rover without a spring, Q̂_xuR⁻¹Q̂_ux
-        exceeds Q̂_xx and that kernel is indefinite although the fit is right, so learning
-        never starts from a zero gain.
+        The least-squares critic is re-fitted (the gradient critic's own fit only
+        scored); then :meth:`policy_improvement`. ``critic_trusted`` (a diagnostic)
+        says whether the critic's value of the actors' own policy passes the guard's
+        test (:meth:`_positive_value`).
         """
         if isinstance(self.critic, LeastSquaresCritic):
             self.critic.evaluate(self._rows)
-        self._since_eval = 0
-        taus = np.linspace(0.5 * self.config.horizon, self.config.horizon, 6)
-        self.critic_trusted = all(np.linalg.eigvalsh(self.policy_value_kernel(t)).min() > 0 for t in taus)
-        if self.critic_trusted:
-            self._safe = (self._Wa.copy(), self._Wd.copy())
         else:
-            self._Wa, self._Wd = self._safe[0].copy(), self._safe[1].copy()
+            self.critic.residual = residual(self._rows, self.critic.window, self.critic.theta)
+        self._since_eval = 0
+        self.critic_trusted = self._positive_value(self.critic.theta, self._Wa, self._Wd)
+        self.policy_improvement()
+
+    def policy_improvement(self) -> None:
+        """Guarded policy improvement (beyond the papers).
+
+        The critic's proposal becomes the actors' target only when it passes every
+        check, in this order.
+
+        1. The critic that proposes it is trusted (:meth:`policy_evaluation`) and its fit
+           explains the data: relative residual <= ``max_fit_residual``.
+        2. Trust region: the step from the current target toward the critic's greedy
+           weights is shortened until ‖ΔK̂(τ)‖ <= ``trust_growth`` max(‖K̂(τ)‖, K_floor)
+           on a grid of τ (every direction of the gain, not only those the data visit),
+           K_floor being the probing scale (or the RMS force applied in the data) over
+           the RMS size of the stored states; and until the force it adds on the stored
+           states stays within the force limit (:func:`guard.trust_step`).
+        3. The proposed policy, evaluated off-policy on the same data (a least-squares fit
+           of its own Q-function, :func:`critic.fit`), fits as well as in 1 and has a
+           positive-definite value P̂ on [T/2, T]. If not, the step is halved, up to
+           three times.
+
+        Nothing is adopted during the first ``actor_warmup_legs`` legs nor for the rest of
+        a leg that reverted. Each adoption and rejection is recorded (``StepInfo``).
+        """
+        c, window = self.config, self.critic.window
+        if self.leg_index < c.actor_warmup_legs or self._held or window.count == 0:
+            return
+        if self.critic.residual > c.max_fit_residual:
+            self._note(PolicyEvent.REJECTED, f'critic: fit residual {self.critic.residual:.3g}'
+                                             f' > {c.max_fit_residual:g}')
+            return
+        Wa, Wd = self._target
+        greedy_a = -self._greedy('u').T
+        greedy_d = self.gamma ** -2 * self._greedy('d').T if self.robust else Wd
+        tau0, x0, _, _, u_applied, _ = window.samples()
+        Z = (self.time_basis.batch(tau0)[:, :, None] * x0[:, None, :]).reshape(len(x0), -1)
+        # the floor of the trust region: the probing scale or the forces applied so far,
+        # over the size of the states they were applied in (N per state unit)
+        force = max(2.0 * c.probing_std, float(np.sqrt(np.mean(u_applied ** 2))))
+        scale = float(np.sqrt(np.mean(np.sum(x0 ** 2, axis=1))))
+        taus = np.linspace(0.0, c.horizon, 6)
+        change = np.array([np.linalg.norm(self.gain(t, greedy_a) - self.gain(t, Wa)) for t in taus])
+        current = np.array([np.linalg.norm(self.gain(t, Wa)) for t in taus])
+        s = trust_step(change, current, force / max(scale, 1e-9), c.trust_growth)
+        du = float(np.abs(Z @ (greedy_a - Wa)).max(initial=0.0))
+        if du * s > c.force_limit:    # never a change beyond the actuator's range on the data
+            s = c.force_limit / du
+        for _ in range(4):
+            cand = (Wa + s * (greedy_a - Wa), Wd + s * (greedy_d - Wd))
+            theta, residual = fit(partial(self._rows, policy=cand), window,
+                                  self.critic.theta, c.ridge)
+            if residual <= c.max_fit_residual and self._positive_value(theta, *cand):
+                self._target = (cand[0].copy(), cand[1].copy())
+                self._adopted_since = True
+                self._note(PolicyEvent.ADOPTED, f'step {s:.3g} of the greedy change')
+                return
+            s *= 0.5
+        self._note(PolicyEvent.REJECTED, 'proposal: its value is not positive definite or its '
+                                         f'fit residual exceeds {c.max_fit_residual:g}')
+
+    def revert(self, reason: str) -> None:
+        """A leg diverged: back to the last policy that completed a leg (or the initial one).
+
+        When nothing was adopted since that policy completed its leg, it is the policy
+        that diverged (in a direction its completed legs never went), and the hold is
+        the initial policy instead. The actors and their target both jump there and stay
+        for the rest of the leg; the data of the diverged leg stay in the critic's
+        window (they are valid rows for any policy).
+        """
+        if self._completed is not None and not self._adopted_since:
+            self._completed = None
+        event = PolicyEvent.REVERTED if self._completed is not None else PolicyEvent.HOLD
+        Wa, Wd = self._completed if self._completed is not None else self._initial
+        self._Wa, self._Wd = Wa.copy(), Wd.copy()
+        self._target = (Wa.copy(), Wd.copy())
+        self._held = True
+        self._note(event, 'leg diverged: ' + reason)
+
+    def _note(self, event: PolicyEvent, reason: str) -> None:
+        self._events.append((event, reason))
+        self.event_counts[event] += 1
 
     def widen_time_basis(self) -> None:
         """Append the powers (τ / T)^k of ``widen_powers`` to the time basis, once.
@@ -240,61 +354,48 @@ class QLearningController:
         """
         c, n, b = self.config, self.n, self.basis
         powers = c.time_powers + tuple(k for k in c.widen_powers if k not in c.time_powers)
-        extra = len(powers) - len(c.time_powers)
+        extra = (len(powers) - len(c.time_powers)) * n
         self.time_basis = TimeBasis(c.time_rates, powers, c.horizon)
         # the old fit (of a value it could not represent) is no prior for the new one
         self.critic.theta = np.zeros(self.time_basis.size * b.free.size)
-
-        def pad(W: Array) -> Array:
-            return np.vstack([W, np.zeros((extra * n, W.shape[1]))])
-        self._Wa, self._Wd = pad(self._Wa), pad(self._Wd)
-        self._safe = (pad(self._safe[0]), pad(self._safe[1]))
+        self._Wa, self._Wd = _pad(self._Wa, extra), _pad(self._Wd, extra)
+        self._target = (_pad(self._target[0], extra), _pad(self._target[1], extra))
+        self._initial = (_pad(self._initial[0], extra), _pad(self._initial[1], extra))
+        if self._completed is not None:
+            self._completed = (_pad(self._completed[0], extra), _pad(self._completed[1], extra))
         self.widened = True
 
-    def policy_value_kernel(self, tau: float) -> Array:
-        """P̂^π(τ) of the actors' own value V̂^π = Q̂(x̄, û, d̂) = ½x̄ᵀP̂^πx̄ (û = -K̂x̄, d̂ = L̂x̄)."""
-        phi = self.time_basis(tau)
-        Q = self.basis.matrix_of(self._full_weights(phi))
-        n = self.n
-        G = np.vstack([np.eye(n), -self.gain(tau)] + ([self.disturbance_gain(tau)] if self.robust else []))
-        P = G.T @ Q @ G
-        return 0.5 * (P + P.T)
-
-    def value_kernel(self, tau: float) -> Array:
-        """P̂(τ) of V̂ = min_u max_d Q̂ = ½x̄ᵀP̂x̄: Q̂_xx - Q̂_xuR⁻¹Q̂_ux (+ γ⁻² Q̂_xdQ̂_dx)."""
-        phi = self.time_basis(tau)
-        Q = self.basis.matrix_of(self._full_weights(phi))
-        n = self.n
-        Qux = self._cross(phi, 'u')
-        P = Q[:n, :n] - Qux.T @ self._Rinv @ Qux
-        if self.robust:
-            Qdx = self._cross(phi, 'd')
-            P = P + self.gamma**-2 * Qdx.T @ Qdx
-        return 0.5 * (P + P.T)
-
-    def _rows(self, *batch: Array) -> tuple[Array, Array, Array, Array]:
+    def _rows(self, *batch: Array, policy: tuple[Array, Array] | None = None
+              ) -> tuple[Array, Array, Array, Array]:
+        """Bellman rows of the batch for ``policy`` (Wa, Wd); by default the actors' own."""
         c = self.config
-        pol = Policy(self._Wa, self._Wd, c.M, c.R, c.P_T, self.gamma, self.time_basis)
+        Wa, Wd = (self._Wa, self._Wd) if policy is None else policy
+        pol = Policy(Wa, Wd, c.M, c.R, c.P_T, self.gamma, self.time_basis)
         return bellman_rows(self.basis, pol, self._fixed_w, c.dt, *batch)
 
-    def actor_update(self, phi: Array, x: Array) -> Array:
-        """Control-actor step towards the critic's greedy policy, RRT-QX (23).
+    def actor_update(self, phi: Array, x: Array, target: Array | None = None) -> Array:
+        """Control-actor step towards ``target``, by default the critic's greedy policy (RRT-QX (23)).
 
-        e_a = Ŵaᵀ z + Q̂_uu⁻¹ Q̂_ux(τ) x̄ with z = μ(τ)x̄ = φ(τ) ⊗ x̄. GRADIENT: the
-        normalised Euler step Ŵa ← Ŵa - α_a Δt z e_aᵀ / (1 + zᵀz); the plain step of (23)
-        multiplies the error along z by 1 - α_a Δt ‖z‖², unstable once α_a Δt ‖x̄‖² > 2
-        (long legs), normalised the factor stays in (1 - α_a Δt, 1]. WHITENED: see
-        :class:`ActorLaw`.
+        e_a = (Ŵa - Ŵa*)ᵀ z with z = μ(τ)x̄ = φ(τ) ⊗ x̄; for the greedy weights Ŵa* this is
+        the papers' Ŵaᵀ z + Q̂_uu⁻¹ Q̂_ux(τ) x̄. GRADIENT: the normalised Euler step
+        Ŵa ← Ŵa - α_a Δt z e_aᵀ / (1 + zᵀz); the plain step of (23) multiplies the error
+        along z by 1 - α_a Δt ‖z‖², unstable once α_a Δt ‖x̄‖² > 2 (long legs), normalised
+        the factor stays in (1 - α_a Δt, 1] whatever the state's size. WHITENED: see
+        :class:`ActorLaw`. The controller passes the guard's adopted target.
         """
-        e_a = self._Wa.T @ _features(phi, x) + self._Rinv @ (self._cross(phi, 'u') @ x)
-        target = -self._greedy('u').T
+        target = -self._greedy('u').T if target is None else target
+        e_a = (self._Wa - target).T @ _features(phi, x)
         self._Wa = self._actor_step(self._Wa, target, phi, x, e_a, self.gains.alpha_a)
         return e_a
 
-    def disturbance_actor_update(self, phi: Array, x: Array) -> Array:
-        """Disturbance-actor step, ACC (23): e_d = Ŵdᵀ z + Q̂_dd⁻¹ Q̂_dx(τ) x̄, Q̂_dd = -γ² I."""
-        e_d = self._Wd.T @ _features(phi, x) - self.gamma ** -2 * (self._cross(phi, 'd') @ x)
-        target = self.gamma ** -2 * self._greedy('d').T
+    def disturbance_actor_update(self, phi: Array, x: Array, target: Array | None = None) -> Array:
+        """Disturbance-actor step, ACC (23): e_d = (Ŵd - Ŵd*)ᵀ z.
+
+        By default toward the critic's greedy Ŵd* (then e_d = Ŵdᵀ z + Q̂_dd⁻¹ Q̂_dx(τ) x̄,
+        Q̂_dd = -γ² I).
+        """
+        target = self.gamma ** -2 * self._greedy('d').T if target is None else target
+        e_d = (self._Wd - target).T @ _features(phi, x)
         self._Wd = self._actor_step(self._Wd, target, phi, x, e_d, self.gains.alpha_d)
         return e_d
 
@@ -305,56 +406,12 @@ class QLearningController:
         z = _features(phi, x)
         return W - (h / (1.0 + z @ z)) * np.outer(z, err)
 
-    def _greedy(self, which: str) -> Array:
-        """Per time function, Q̂_ux (m x n) or Q̂_dx (q x n) stacked as (m|q) x (L n)."""
-        L, n = self.time_basis.size, self.n
-        idx = self._free_xu if which == 'u' else self._free_xd
-        width = self.m if which == 'u' else self.q
-        blocks = self.critic.theta.reshape(L, -1)[:, idx].reshape(L, n, width)
-        Q = np.concatenate([blk.T for blk in blocks], axis=1)
-        return self._Rinv @ Q if which == 'u' else Q
-
-    # ------------------------------------------------------------ readouts
-    def gain(self, tau: float) -> Array:
-        """Learned feedback gain K̂(τ) (m x n) of the control actor: û = -K̂(τ) x̄."""
-        phi = self.time_basis(tau)
-        return -np.einsum('l,lij->ji', phi, self._Wa.reshape(-1, self.n, self.m))
-
-    def critic_gain(self, tau: float) -> Array:
-        """Greedy gain of the critic, Q̂_uu⁻¹ Q̂_ux(τ) (what the actor converges to)."""
-        return self._Rinv @ self._cross(self.time_basis(tau), 'u')
-
-    def disturbance_gain(self, tau: float) -> Array:
-        """Learned disturbance gain L̂(τ) (q x n) of the disturbance actor: d̂ = L̂(τ) x̄."""
-        phi = self.time_basis(tau)
-        return np.einsum('l,lij->ji', phi, self._Wd.reshape(-1, self.n, self.q))
-
-    def q_matrix(self, tau: float) -> Array:
-        """The estimated kernel Q̄̂(τ) of Q̂ = ½ Uᵀ Q̄̂ U (RRT-QX (13), ACC (12))."""
-        return self.basis.matrix_of(self._full_weights(self.time_basis(tau)))
-
-    @property
-    def critic_weights(self) -> Array:
-        """Ŵc: all critic weights, time function by time function (fixed blocks included)."""
-        L, b = self.time_basis.size, self.basis
-        W = np.zeros((L, b.size))
-        W[:, b.free] = self.critic.theta.reshape(L, -1)
-        W[0, b.fixed] = self._fixed_w
-        return W.ravel()
-
-    @property
-    def actor_weights(self) -> Array:
-        """Ŵa, (L n) x m, flattened."""
-        return self._Wa.ravel().copy()
-
-    @property
-    def disturbance_weights(self) -> Array:
-        """Ŵd, (L n) x q, flattened (empty in the nominal variant)."""
-        return self._Wd.ravel().copy()
-
     def set_weights(self, critic: Array | None = None, actor: Array | None = None,
                     disturbance: Array | None = None) -> None:
-        """Load learned weights (e.g. saved from a previous run); shapes as the accessors."""
+        """Load learned weights (e.g. saved from a previous run); shapes as the accessors.
+
+        Loaded actor weights are also the actors' target (an adopted policy).
+        """
         L, b = self.time_basis.size, self.basis
         if critic is not None:
             self.critic.theta = np.asarray(critic, dtype=float).reshape(L, b.size)[:, b.free].ravel()
@@ -362,6 +419,7 @@ class QLearningController:
             self._Wa = np.asarray(actor, dtype=float).reshape(self._Wa.shape).copy()
         if disturbance is not None:
             self._Wd = np.asarray(disturbance, dtype=float).reshape(self._Wd.shape).copy()
+        self._target = (self._Wa.copy(), self._Wd.copy())
 
     def check_gains(self) -> list[str]:
         """Warnings where α_a, α_c, α_d violate the stability bounds for the current critic."""
@@ -369,26 +427,3 @@ class QLearningController:
         return self.warnings
 
     # ------------------------------------------------------------- helpers
-    def _probe(self, previous: Array, std: float) -> Array:
-        """Next probing sample: Ornstein-Uhlenbeck with stationary standard deviation ``std``."""
-        a = self._ou
-        return a * previous * (std > 0) + np.sqrt(1.0 - a * a) * std * self._rng.standard_normal(previous.size)
-
-    def _full_weights(self, phi: Array) -> Array:
-        w = np.zeros(self.basis.size)
-        w[self.basis.free] = phi @ self.critic.theta.reshape(phi.size, -1)
-        w[self.basis.fixed] = self._fixed_w
-        return w
-
-    def _cross(self, phi: Array, which: str) -> Array:
-        """Q̂_ux(τ) (m x n) or Q̂_dx(τ) (q x n) at the time basis value φ(τ)."""
-        theta = self.critic.theta.reshape(phi.size, -1)
-        idx = self._free_xu if which == 'u' else self._free_xd
-        width = self.m if which == 'u' else self.q
-        return (phi @ theta[:, idx]).reshape(self.n, width).T
-
-    def _policy_u(self, phi: Array, x: Array) -> Array:
-        return self._Wa.T @ _features(phi, x)
-
-    def _policy_d(self, phi: Array, x: Array) -> Array:
-        return self._Wd.T @ _features(phi, x)

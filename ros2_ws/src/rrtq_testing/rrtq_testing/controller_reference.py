@@ -187,6 +187,7 @@ def _one_leg(ctrl, plant, Pf, Qd, disp, v, t, T, dt, rho, R, B, q, disturbance, 
     ctrl.start_leg(x, t)
     D0 = float(np.linalg.norm(x))
     cost, errs, k, reached = 0.0, [], 0, False
+    d_prev = None  # the disturbance that acted over the last Δt, as /disturbance reports it
     while True:
         tau = T - k * dt
         if np.linalg.norm(x) <= rho * D0:
@@ -194,7 +195,7 @@ def _one_leg(ctrl, plant, Pf, Qd, disp, v, t, T, dt, rho, R, B, q, disturbance, 
             break
         if tau <= 1e-9:
             break
-        u = ctrl.step(t, x)
+        u = ctrl.step(t, x) if d_prev is None else ctrl.step(t, x, d_prev)
         K = np.linalg.solve(R, B.T @ Pf(tau))
         errs.append(np.linalg.norm(ctrl.gain(tau) - K) / np.linalg.norm(K))
         if q:
@@ -204,6 +205,7 @@ def _one_leg(ctrl, plant, Pf, Qd, disp, v, t, T, dt, rho, R, B, q, disturbance, 
         z = np.concatenate([x, u, d])
         cost += 0.5 * float(z @ Qd @ z)
         x = plant.step(x, u, d if q else None)
+        d_prev = d if q and disturbance is not None else None
         t += dt
         k += 1
     tau_end = T - k * dt

@@ -28,6 +28,7 @@ _DIST_KEYS = ('model', 'F', 'amplitude', 'frequency', 'gamma')
 _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
+    'force_limit',
 )  # fmt: skip
 # planner key -> the settings dataclass it belongs to
 _PLANNER_KEYS: dict[str, type] = {
@@ -145,8 +146,12 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
     numbers = {name: r.setting(data, name, ControllerConfig, key)
                for name in ('alpha_c', 'alpha_a', 'alpha_d', 'rho', 'probing_std',
                             'probing_decay')}
+    # the actuator's limit is the user's specification; by default the plant's
+    limit = (plant.force_limit if data.get('force_limit') is None
+             else r.setting(data, 'force_limit', ControllerConfig, key, allow_inf=True))
     return ControllerConfig(
         variant=variant, horizon=horizon, dt=dt, gamma=gamma, forces=forces,
+        force_limit=limit,
         goal=(float(world.goal[0]), float(world.goal[1])),
         critic_law=_choice(r, data, 'critic_law', ControllerConfig, key),
         actor_law=_choice(r, data, 'actor_law', ControllerConfig, key),

@@ -1,0 +1,105 @@
+"""Guards of safe learning (beyond the papers): trust region, divergence watch, events.
+
+The papers' actor follows the critic's greedy policy at every step. Where the critic was
+fitted to little data (the first legs from a zero gain, one direction of motion), its
+cross terms Q̂_ux are poorly identified and the greedy gain can be arbitrarily large: on
+the rover without a spring the first greedy policy once commanded -3.2e5 N. The
+controller therefore adopts a new actor target only when it passes stated checks
+(:meth:`rrtq_controller.q_learning.QLearningController.policy_improvement`), bounds
+each change (:func:`trust_step`), and watches every leg for divergence
+(:class:`DivergenceWatch`), reverting to the last policy that completed a leg.
+Everything here is model-free: it uses the data, the cost weights and the actuator's
+limit, never the plant's matrices.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+Array = NDArray[np.float64]
+
+
+class PolicyEvent(enum.Enum):
+    """What the guard decided about the actors' policy (``ControllerState.policy_event``)."""
+
+    ADOPTED = 'adopted'
+    """A new actor target passed every check (possibly shortened by the trust region)."""
+    REJECTED = 'rejected'
+    """The critic's proposal failed a check; the actors keep their current target."""
+    REVERTED = 'reverted'
+    """A leg diverged: the actors are back at the last policy that completed a leg."""
+    HOLD = 'hold'
+    """A leg diverged before any policy completed a leg: back at the initial policy."""
+
+
+def trust_step(change: Array, current: Array, floor: float, growth: float) -> float:
+    """Length s in (0, 1] of the step from the actors' target toward the critic's proposal.
+
+    ``change`` and ``current`` are norms of the proposed change and of the current
+    target (‖K̂*(τ) - K̂(τ)‖ and ‖K̂(τ)‖ on a grid of τ): the trust region allows a
+    change of at most ``growth`` times the current size, or ``floor`` where that is
+    smaller (so that a zero gain can start). A policy may become twice as aggressive
+    per adoption, not a hundred times.
+
+    Returns
+    -------
+    float
+        1 when the whole step fits, else the largest fraction of it that does.
+    """
+    radius = growth * np.maximum(current, floor)
+    over = change > radius
+    return float(np.min(radius[over] / change[over])) if over.any() else 1.0
+
+
+@dataclass
+class DivergenceWatch:
+    """Declares a leg diverged when the robot runs away from its target.
+
+    A leg diverges when D = ‖x̄‖ > ``distance`` D0 + ``floor`` (the robot is much farther
+    from its target than the reference start), or when the speed ‖x̄[2:]‖ exceeds
+    ``speed`` (L + ‖v0‖ T) / T + ``floor`` with L = ‖x̄0[:2]‖ the reference leg's length
+    and v0 = x̄0[2:] its initial velocity: a multiple of the speed that covers the leg,
+    and the motion it started with, in one horizon T. The reference (D0, L, v0) is the
+    start of the last leg that began afresh (the first, one after a completed leg or
+    after a revert): legs that a new plan or the horizon restarts keep it, so a robot
+    that runs away cannot escape the watch by the legs it starts on its way. It trips at
+    most once per leg.
+    """
+
+    distance: float
+    floor: float
+    speed: float
+    horizon: float
+    d0: float = 0.0
+    speed_bound: float = math.inf
+    tripped: bool = False
+
+    def start(self, x0: Array, renew: bool = True) -> None:
+        """A new leg from x̄0; ``renew`` makes it the reference."""
+        self.tripped = False
+        if not renew:
+            return
+        self.d0 = float(np.linalg.norm(x0))
+        length = float(np.linalg.norm(x0[:2]))
+        v0 = float(np.linalg.norm(x0[2:]))
+        self.speed_bound = self.speed * (length + v0 * self.horizon) / self.horizon + self.floor
+
+    def check(self, x: Array) -> str:
+        """'' while the leg is fine; the criterion it broke, the first time it breaks one."""
+        if self.tripped:
+            return ''
+        d = float(np.linalg.norm(x))
+        bound = self.distance * self.d0 + self.floor
+        if d > bound:
+            self.tripped = True
+            return f'D = {d:.3g} > {self.distance:g} D0 + {self.floor:g} = {bound:.3g}'
+        v = float(np.linalg.norm(x[2:]))
+        if v > self.speed_bound:
+            self.tripped = True
+            return f'speed {v:.3g} > {self.speed_bound:.3g} (bound from the leg length and T)'
+        return ''

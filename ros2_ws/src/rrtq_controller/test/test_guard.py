@@ -1,0 +1,155 @@
+"""Safe learning: the actuator's limit, guarded policy improvement, divergence and revert.
+
+Ground truth from the true plants (rrtq_testing.controller_reference), which the
+controller never sees.
+"""
+
+import numpy as np
+
+from rrtq_controller.config import ControllerConfig
+from rrtq_controller.guard import DivergenceWatch, PolicyEvent, trust_step
+from rrtq_controller.q_learning import QLearningController
+from rrtq_testing import controller_reference as ref
+
+M, P_T, T, DT = 10.0 * np.eye(4), 0.5 * np.eye(4), 10.0, 0.05
+R = 0.02 * np.eye(2)
+
+
+class Recorder:
+    """Wraps a controller's step: every command and every guard event."""
+
+    def __init__(self, ctrl):
+        self.ctrl, self.commands, self.events = ctrl, [], []
+        step = ctrl.step
+
+        def recorded(t, x, d=None):
+            u = step(t, x) if d is None else step(t, x, d)
+            self.commands.append(u.copy())
+            if ctrl.info.policy_event:
+                self.events += ctrl.info.policy_event.split(';')
+            return u
+        ctrl.step = recorded
+
+
+def test_commands_never_exceed_the_limit_and_learning_converges_where_it_binds():
+    """A 60 N actuator on the rover without a spring, whose optimum asks up to ~150 N on
+    these legs: the commands stay within ±60 N, and since the Bellman rows use the
+    applied force, the learned gain still converges to the (unconstrained) Riccati gain
+    that the off-policy critic evaluates."""
+    limit = 60.0
+    A, B = ref.rover(stiffness=0.0)
+    ctrl = QLearningController(ControllerConfig(force_limit=limit), 4, 2, 0,
+                               np.random.default_rng(2))
+    rec = Recorder(ctrl)
+    legs = ref.random_legs(np.random.default_rng(1002), 20)
+    recs = ref.run_legs(ctrl, A, B, M, R, P_T, T, DT, legs, ctrl.config.rho)
+    u = np.array(rec.commands)
+    assert np.abs(u).max() <= limit
+    assert np.mean(np.abs(u).max(axis=1) >= limit - 1e-9) > 0.01      # the limit did bind
+    optimum_peak = max(np.abs(np.linalg.solve(R, B.T @ ref.riccati(A, B, M, R, P_T, T)(T))
+                              @ np.concatenate([-d, [0, 0]])).max() for d in legs)
+    assert optimum_peak > 1.5 * limit
+    assert np.mean([r.gain_error for r in recs[-4:]]) < 0.1
+    assert all(r.reached for r in recs[-5:])
+
+
+def _learned(seed, legs=6):
+    A, B = ref.rover(stiffness=0.0)
+    ctrl = QLearningController(ControllerConfig(), 4, 2, 0, np.random.default_rng(seed))
+    rec = Recorder(ctrl)
+    ref.run_legs(ctrl, A, B, M, R, P_T, T, DT,
+                 ref.random_legs(np.random.default_rng(seed), legs), ctrl.config.rho)
+    ctrl._held = False
+    return ctrl, rec
+
+
+def test_a_forced_bad_critic_update_is_rejected():
+    """Corrupted data (odometry glitches in a tenth of the critic's window: next
+    positions off by about a metre) make a bad critic update; the policy it proposes
+    has a value that is negative on the data, and the guard rejects it: the actors'
+    target does not move."""
+    ctrl, rec = _learned(3)
+    assert 'adopted' in rec.events   # it did learn before (the guard is not just closed)
+    target = ctrl._target[0].copy()
+    window = ctrl.critic.window
+    glitches = window.count // 10
+    window._x1[:glitches, :2] += np.random.default_rng(0).normal(0.0, 1.0, (glitches, 2))
+    rejected = ctrl.event_counts[PolicyEvent.REJECTED]
+    ctrl.policy_evaluation()
+    assert ctrl.event_counts[PolicyEvent.REJECTED] == rejected + 1
+    assert np.array_equal(ctrl._target[0], target)
+
+
+def test_a_garbage_proposal_moves_the_policy_at_most_by_the_trust_region():
+    """A critic whose cross terms are replaced by garbage (a greedy gain 50 times the
+    critic's, of the wrong sign): whatever the guard does with it, the actors' gain
+    changes by at most trust_growth times its size on the whole horizon."""
+    ctrl, _ = _learned(4)
+    taus = np.linspace(0.0, T, 6)
+    before = [ctrl.gain(t, ctrl._target[0]) for t in taus]
+    theta = ctrl.critic.theta.reshape(ctrl.time_basis.size, -1).copy()
+    theta[:, ctrl._free_xu] *= -50.0
+    ctrl.critic.theta = theta.ravel()
+    ctrl.policy_improvement()
+    for t, k in zip(taus, before):
+        change = np.linalg.norm(ctrl.gain(t, ctrl._target[0]) - k)
+        assert change <= ctrl.config.trust_growth * np.linalg.norm(k) + 1e-9
+
+
+def test_a_diverging_leg_reverts_to_the_last_policy_that_completed_a_leg():
+    """A destabilising gain (positive feedback) adopted after good learning: the leg's D
+    runs away, the controller reverts to the policy that last completed a leg, and that
+    policy brings the robot to the target's window instead of leaving for good."""
+    A, B = ref.rover(stiffness=0.0)
+    ctrl, _ = _learned(5, legs=12)
+    x = np.array([-5.0, 0.0, 0.0, 0.0])
+    t0 = ctrl._t0 + T
+    ctrl.start_leg(x, t0, completed=True)     # the last leg entered its window
+    good = ctrl.gain(T).copy()
+    ctrl.set_weights(actor=ctrl.actor_weights.reshape(-1, 2) * -3.0)
+    ctrl._adopted_since = True               # as if the guard had adopted it since
+    plant = ref.Plant(A, B, DT)
+    events, distances = [], []
+    for k in range(int(T / DT)):
+        x = plant.step(x, ctrl.step(t0 + k * DT, x))
+        distances.append(np.linalg.norm(x))
+        events.append(ctrl.info.policy_event)
+        if distances[-1] <= ctrl.config.rho * 5.0:
+            break
+    assert 'reverted' in events
+    assert np.allclose(ctrl.gain(T), good, rtol=0.05, atol=0.5)
+    assert distances[-1] <= ctrl.config.rho * 5.0          # the reverted policy brings it home
+    assert max(distances) <= ctrl.config.divergence_distance * 5.0 + ctrl.config.divergence_floor + 1.0
+
+
+def test_the_policy_that_diverged_is_not_the_one_reverted_to():
+    """When nothing was adopted since the last completed leg, the diverging policy is that
+    very policy: the hold is the initial policy (zero force), not the same gain again."""
+    ctrl = QLearningController(ControllerConfig(), 4, 2, 0, np.random.default_rng(0))
+    ctrl.start_leg(np.array([-3.0, 0.0, 0.0, 0.0]), 0.0)
+    ctrl.set_weights(actor=np.full((ctrl.time_basis.size * 4, 2), 5.0))
+    ctrl.completed_leg()
+    ctrl.revert('test')
+    assert ctrl.event_counts[PolicyEvent.HOLD] == 1
+    assert np.allclose(ctrl.gain(T), 0.0)
+
+
+def test_divergence_watch_keeps_its_reference_across_restarted_legs():
+    """A robot running away while new plans restart its legs (each from farther away) is
+    still caught: legs that did not begin afresh keep the reference start."""
+    watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0)
+    watch.start(np.array([-3.0, 0.0, 0.0, 0.0]))
+    assert watch.check(np.array([-5.0, 0.0, 0.5, 0.0])) == ''
+    watch.start(np.array([-8.0, 0.0, 1.0, 0.0]), renew=False)
+    assert 'D =' in watch.check(np.array([-10.5, 0.0, 1.0, 0.0]))
+    watch.start(np.array([-8.0, 0.0, 1.0, 0.0]), renew=True)
+    assert watch.check(np.array([-10.5, 0.0, 1.0, 0.0])) == ''
+    assert 'speed' in watch.check(np.array([-10.5, 0.0, 20.0, 0.0]))
+
+
+def test_trust_step_bounds_the_change_by_the_current_size_or_the_floor():
+    current = np.array([2.0, 4.0])
+    assert trust_step(np.array([1.0, 1.0]), current, floor=0.5, growth=1.0) == 1.0
+    s = trust_step(np.array([8.0, 1.0]), current, floor=0.5, growth=1.0)
+    assert np.isclose(s, 2.0 / 8.0)
+    assert np.isclose(trust_step(np.array([10.0]), np.zeros(1), floor=0.5, growth=1.0), 0.05)
