@@ -71,7 +71,10 @@ def test_defaults_follow_design_example():
     c = sc.controller
     assert (c.variant, c.horizon, c.dt, c.rho) == ('nominal', 10.0, 0.05, 0.15)
     np.testing.assert_array_equal(c.M, 10.0 * np.eye(4))
-    np.testing.assert_array_equal(c.R, 2.0 * np.eye(2))
+    # 0.02, not the paper's 2: at R = 2 the finite-horizon optimum on a rover without a spring
+    # moves 0.5 m of a 5 m leg in 10 s (docs/scenarios.md, controller keys)
+    np.testing.assert_array_equal(c.R, 0.02 * np.eye(2))
+    assert c.force_limit == p.force_limit
     assert c.alpha_c is None and c.gamma is None
     assert sc.planner.epsilon == 0.0 and sc.obstacles == ()
 

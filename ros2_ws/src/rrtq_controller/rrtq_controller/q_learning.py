@@ -250,14 +250,15 @@ class QLearningController(WeightReadout):
         The least-squares critic is re-fitted (the gradient critic's own fit only
         scored); then :meth:`policy_improvement`. ``critic_trusted`` (a diagnostic)
         says whether the critic's value of the actors' own policy passes the guard's
-        test (:meth:`_positive_value`).
+        test (:meth:`_negative_value_share` within ``value_tolerance``).
         """
         if isinstance(self.critic, LeastSquaresCritic):
             self.critic.evaluate(self._rows)
         else:
             self.critic.residual = residual(self._rows, self.critic.window, self.critic.theta)
         self._since_eval = 0
-        self.critic_trusted = self._positive_value(self.critic.theta, self._Wa, self._Wd)
+        share = self._negative_value_share(self.critic.theta, self._Wa, self._Wd)
+        self.critic_trusted = share <= self.config.value_tolerance
         self.policy_improvement()
 
     def policy_improvement(self) -> None:
@@ -275,9 +276,15 @@ class QLearningController(WeightReadout):
            the RMS size of the stored states; and until the force it adds on the stored
            states stays within the force limit (:func:`guard.trust_step`).
         3. The proposed policy, evaluated off-policy on the same data (a least-squares fit
-           of its own Q-function, :func:`critic.fit`), fits as well as in 1 and has a
-           positive-definite value P̂ on [T/2, T]. If not, the step is halved, up to
-           three times.
+           of its own Q-function, :func:`critic.fit`), fits as well as in 1 and its value
+           is positive on the data: a negative share of at most ``value_tolerance``, or
+           no more than the current target's own under the critic (where a leg enters
+           times-to-go no sample covers, neither is identified there, and the status quo
+           is not the safer choice). Once a policy has completed a leg (the status quo
+           works), more is asked: the proposal's value kernel P̂(τ) must be positive
+           definite as a matrix on [T/2, T] (every direction of x̄ identified, not only
+           those the data visit), as the previous controller asked of its critic before
+           following it at all. If not, the step is halved, up to three times.
 
         Nothing is adopted during the first ``actor_warmup_legs`` legs nor for the rest of
         a leg that reverted. Each adoption and rejection is recorded (``StepInfo``).
@@ -303,13 +310,16 @@ class QLearningController(WeightReadout):
         current = np.array([np.linalg.norm(self.gain(t, Wa)) for t in taus])
         s = trust_step(change, current, force / max(scale, 1e-9), c.trust_growth)
         du = float(np.abs(Z @ (greedy_a - Wa)).max(initial=0.0))
+        allowed = max(c.value_tolerance, self._negative_value_share(self.critic.theta, Wa, Wd))
         if du * s > c.force_limit:    # never a change beyond the actuator's range on the data
             s = c.force_limit / du
         for _ in range(4):
             cand = (Wa + s * (greedy_a - Wa), Wd + s * (greedy_d - Wd))
             theta, residual = fit(partial(self._rows, policy=cand), window,
                                   self.critic.theta, c.ridge)
-            if residual <= c.max_fit_residual and self._positive_value(theta, *cand):
+            if (residual <= c.max_fit_residual
+                    and self._negative_value_share(theta, *cand) <= allowed
+                    and (self._completed is None or self._definite_value(theta, *cand))):
                 self._target = (cand[0].copy(), cand[1].copy())
                 self._adopted_since = True
                 self._note(PolicyEvent.ADOPTED, f'step {s:.3g} of the greedy change')
@@ -317,6 +327,12 @@ class QLearningController(WeightReadout):
             s *= 0.5
         self._note(PolicyEvent.REJECTED, 'proposal: its value is not positive definite or its '
                                          f'fit residual exceeds {c.max_fit_residual:g}')
+
+    def _definite_value(self, theta: Array, Wa: Array, Wd: Array) -> bool:
+        """Whether a policy's value kernel under a critic fit is positive definite on [T/2, T]."""
+        taus = np.linspace(0.5 * self.config.horizon, self.config.horizon, 6)
+        return all(np.linalg.eigvalsh(self.policy_value_kernel(t, theta, Wa, Wd)).min() > 0
+                   for t in taus)
 
     def revert(self, reason: str) -> None:
         """A leg diverged: back to the last policy that completed a leg (or the initial one).

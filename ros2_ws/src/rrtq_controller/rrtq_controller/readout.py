@@ -142,22 +142,21 @@ class WeightReadout:
     def _policy_d(self, phi: Array, x: Array) -> Array:
         return self._Wd.T @ _features(phi, x)
 
-    def _positive_value(self, theta: Array, Wa: Array, Wd: Array) -> bool:
-        """Whether a policy's value under a critic fit is positive where the data are.
+    def _negative_value_share(self, theta: Array, Wa: Array, Wd: Array) -> float:
+        """The negative part of a policy's value under a critic fit, where the data are.
 
-        Every policy's value is (M >= 0, P(T) > 0); here (Wa, Wd) under θ.
-
-        V̂(x̄_i, τ_i) = ½ x̄_iᵀ P̂(τ_i) x̄_i at the stored samples may have a negative part
-        of at most ``value_tolerance`` of Σ|V̂|: a disturbance the critic cannot see
-        leaves a small one (0.1 %), a critic that has not been identified a large one
-        (90 % on the first leg from a zero gain). Positive definiteness of P̂(τ) as a
-        matrix is not asked: the data identify some directions (positions) far better
-        than others (velocities, on the first legs), and in those the trust region
-        bounds the change instead.
+        Every policy's value is positive (M >= 0, P(T) > 0); here (Wa, Wd) under θ, at the
+        stored samples: V̂(x̄_i, τ_i) = ½ x̄_iᵀ P̂(τ_i) x̄_i, and the share returned is
+        Σ max(-V̂, 0) / Σ |V̂| (1 without data). A disturbance the critic cannot see leaves
+        a small one (0.1 %), a critic that has not been identified a large one (90 % on the
+        first leg from a zero gain; a few % where a leg enters times-to-go τ that no stored
+        sample covers). Positive definiteness of P̂(τ) as a matrix is not asked: the data
+        identify some directions (positions) far better than others (velocities, on the
+        first legs), and in those the trust region bounds the change instead.
         """
         tau0, x0, *_ = self.critic.window.samples()
         if not len(tau0):
-            return False
+            return 1.0
         phi = self.time_basis.batch(tau0)
         full = np.zeros((len(tau0), self.basis.size))
         full[:, self.basis.free] = phi @ theta.reshape(phi.shape[1], -1)
@@ -166,4 +165,4 @@ class WeightReadout:
         U = np.hstack([x0, z @ Wa] + ([z @ Wd] if self.robust else []))
         value = np.einsum('ij,ij->i', full, U[:, self.basis.rows] * U[:, self.basis.cols])
         total = float(np.sum(np.abs(value)))
-        return total > 0 and float(np.sum(np.maximum(-value, 0.0))) <= self.config.value_tolerance * total
+        return float(np.sum(np.maximum(-value, 0.0))) / total if total > 0 else 1.0
