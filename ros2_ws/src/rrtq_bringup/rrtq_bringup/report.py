@@ -80,6 +80,10 @@ def summarise(data: RunData, scenario: dict,
         'time_to_goal_s': float(data.odom_t[reached[0]]) if reached.size else None,
         'legs': int(data.leg_index.max()) + 1 if data.leg_index.size else 0,
         'max_d_rob_m': float(data.d_rob_max.max()) if data.d_rob_max.size else None,
+        'max_abs_force_n': float(np.abs(data.cmd_u).max()) if data.cmd_u.size else 0.0,
+        'force_limit_n': data.force_limit,
+        'policy_events': {e: sum(1 for _, ev, _ in data.policy_events if ev == e)
+                          for e in sorted({ev for _, ev, _ in data.policy_events})},
         'topics': data.topics,
     }
 
@@ -140,6 +144,25 @@ def plot_map(data: RunData, scenario: dict, path: pathlib.Path) -> None:
     plt.close(fig)
 
 
+_EVENT_STYLE = {'adopted': ('tab:green', '|'), 'rejected': ('tab:gray', 'x'),
+                'reverted': ('tab:red', 'v'), 'hold': ('tab:purple', 'v')}
+
+
+def _mark_policy_events(ax: plt.Axes, data: RunData) -> None:
+    """The guard's adoptions, rejections and reverts as marks along the panel's bottom."""
+    if not data.policy_events:
+        return
+    low = ax.get_ylim()[0]
+    for event, (colour, marker) in _EVENT_STYLE.items():
+        times = [t for t, e, _ in data.policy_events if e == event]
+        if times:
+            ax.plot(times, [low] * len(times), ls='', marker=marker, color=colour, ms=6,
+                    clip_on=False, label=f'policy {event} ({len(times)})')
+    for t, e, _ in data.policy_events:
+        if e in ('reverted', 'hold'):
+            ax.axvline(t, color=_EVENT_STYLE[e][0], lw=0.8, alpha=0.6)
+
+
 def plot_timeseries(data: RunData, scenario: dict, path: pathlib.Path) -> None:
     panels = ['forces', 'motion']
     if data.dist_t.size and np.any(data.dist_d):
@@ -154,7 +177,11 @@ def plot_timeseries(data: RunData, scenario: dict, path: pathlib.Path) -> None:
         if panel == 'forces':
             ax.plot(data.cmd_t, data.cmd_u[:, 0], label='$f_x$')
             ax.plot(data.cmd_t, data.cmd_u[:, 1], label='$f_y$')
+            if np.isfinite(data.force_limit) and data.force_limit > 0:
+                for sign in (1, -1):
+                    ax.axhline(sign * data.force_limit, color='k', lw=0.6, ls=':')
             ax.set_ylabel('force [N]')
+            _mark_policy_events(ax, data)
         elif panel == 'motion':
             ax.plot(data.odom_t, np.linalg.norm(data.odom_x[:, 2:], axis=1), label='speed [m/s]')
             if data.goal is not None:
@@ -176,6 +203,7 @@ def plot_timeseries(data: RunData, scenario: dict, path: pathlib.Path) -> None:
                 if any(w.size for w in ws):
                     ax.plot(data.state_t, [np.linalg.norm(w) for w in ws], label=f'|W| {name}')
             ax.set_ylabel('weight norm')
+            _mark_policy_events(ax, data)
         ax.legend(loc='upper right', fontsize=8)
         ax.grid(alpha=0.3)
     axes[-1].set_xlabel('sim time [s]')

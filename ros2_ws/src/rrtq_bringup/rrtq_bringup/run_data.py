@@ -58,6 +58,9 @@ class RunData:
     topics: dict[str, int]
     time_rates: list[float] = dataclasses.field(default_factory=list)   # controller's basis
     time_powers: list[float] = dataclasses.field(default_factory=list)
+    force_limit: float = float('inf')        # the controller's actuator limit, N per axis
+    policy_events: list[tuple[float, str, str]] = dataclasses.field(default_factory=list)
+    """(t, event, reason) of every step the guard of safe learning acted at."""
 
 
 # Topics read_run decodes; every other topic is only counted.
@@ -136,7 +139,11 @@ def read_run(path: str | pathlib.Path) -> RunData:
         truth=series['truth'], detected=series['detected'], augmented=series['augmented'],
         plans=series['plan'], tree_segments=_tree_segments(tree), goal=goal, topics=topics,
         time_rates=list(getattr(states[-1], 'time_rates', [])) if states else [],
-        time_powers=list(getattr(states[-1], 'time_powers', [])) if states else [])
+        time_powers=list(getattr(states[-1], 'time_powers', [])) if states else [],
+        force_limit=float(getattr(states[-1], 'force_limit', 0.0) or float('inf')) if states else float('inf'),
+        policy_events=[(_stamp(m.header), e, r) for m in states
+                       if getattr(m, 'policy_event', '')
+                       for e, r in zip(m.policy_event.split(';'), m.policy_reason.split('; '))])
 
 
 def _tree_segments(msg) -> np.ndarray | None:

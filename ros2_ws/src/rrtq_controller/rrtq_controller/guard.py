@@ -80,9 +80,13 @@ class DivergenceWatch:
     tripped: bool = False
 
     def start(self, x0: Array, renew: bool = True) -> None:
-        """A new leg from x̄0; ``renew`` makes it the reference."""
+        """A new leg from x̄0; ``renew`` makes it the reference.
+
+        A reference leg that started on its target (D0 = 0: the robot at rest before the
+        first plan) is no reference; the next leg replaces it in any case.
+        """
         self.tripped = False
-        if not renew:
+        if not renew and self.d0 > 1e-9:
             return
         self.d0 = float(np.linalg.norm(x0))
         length = float(np.linalg.norm(x0[:2]))

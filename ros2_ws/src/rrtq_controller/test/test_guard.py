@@ -147,6 +147,15 @@ def test_divergence_watch_keeps_its_reference_across_restarted_legs():
     assert 'speed' in watch.check(np.array([-10.5, 0.0, 20.0, 0.0]))
 
 
+def test_a_leg_that_started_on_its_target_is_no_reference():
+    """At rest before the first plan (D0 = 0) the plan's first leg becomes the reference."""
+    watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0)
+    watch.start(np.zeros(4))
+    watch.start(np.array([-3.2, -0.7, 0.0, 0.0]), renew=False)
+    assert watch.check(np.array([-3.2, -0.7, 0.1, 0.0])) == ''
+    assert 'D =' in watch.check(np.array([-12.0, 0.0, 0.1, 0.0]))
+
+
 def test_trust_step_bounds_the_change_by_the_current_size_or_the_floor():
     current = np.array([2.0, 4.0])
     assert trust_step(np.array([1.0, 1.0]), current, floor=0.5, growth=1.0) == 1.0
