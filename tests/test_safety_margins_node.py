@@ -12,6 +12,7 @@ import shapely
 from geometry_msgs.msg import Point
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
 from rrtq_msgs.msg import ControllerState
 
 from rrtq_common import conversions as conv
@@ -64,6 +65,7 @@ def mission(node, legs):
             before = len(published)
             node.step(Step(stamp, {'odom': odom_at(stamp, leg + s / STEPS_PER_LEG, y),
                                    'detected': detected, 'perception': None, 'state': state}))
+            serialize_message(statuses[-1])     # what a publisher does with it (C types)
             out.append((statuses[-1], published[before:]))
             state = leg_state(stamp, leg)       # what the next step sees (lag 1)
             k += 1

@@ -60,10 +60,13 @@ def safety_status_msg(header: Header, step: SafetyStep, margin: MarginStatus) ->
         d_rob=step.d_rob, d_rob_max=step.d_rob_max, margin=step.margin,
         min_clearance=step.clearance, nearest_obstacle=step.nearest, collision=step.collision,
         leg_index=step.leg_index, augmented_stamp=time_msg(step.augmented_stamp_ns),
-        margin_mode=margin.mode.value, leg_margin=margin.leg_margin, bound=margin.bound,
-        confidence=margin.confidence, samples=margin.samples, violations=margin.violations,
-        bound_violations=margin.bound_violations, leg_deviation=margin.leg_deviation,
-        legs=margin.legs)
+        # int() and float(): the policies' counts may be numpy scalars, which the C
+        # conversion of a uint32 field rejects.
+        margin_mode=margin.mode.value, leg_margin=float(margin.leg_margin),
+        bound=float(margin.bound), confidence=float(margin.confidence),
+        samples=int(margin.samples), violations=int(margin.violations),
+        bound_violations=int(margin.bound_violations),
+        leg_deviation=float(margin.leg_deviation), legs=int(margin.legs))
     status.header = header
     return status
 
