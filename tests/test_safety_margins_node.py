@@ -47,6 +47,9 @@ def leg_state(stamp_ns, index):
     state.header.stamp = conv.time_msg(stamp_ns)
     state.leg_start, state.leg_target = Point(x=float(index)), Point(x=float(index + 1))
     state.command, state.probing_noise = [0.0, 0.0], [0.0, 0.0]
+    # A PD actor on the constant time function: K = [[4, 0, 3, 0], [0, 4, 0, 3]].
+    state.time_rates = [0.0]
+    state.actor_weights = (-np.array([[4.0, 0.0], [0.0, 4.0], [3.0, 0.0], [0.0, 3.0]])).ravel().tolist()
     return state
 
 
@@ -127,3 +130,28 @@ def test_running_max_never_shrinks_and_counts_no_violations(node_of):
     assert last.margin == pytest.approx(TRANSIENT + 0.5)
     values = [status.margin for status, msgs in steps if msgs]
     assert values == sorted(values)
+
+
+def test_learned_bound_runs_in_the_node_and_starts_from_its_initial_margin(node_of):
+    # Before any fit the bank has no finite level: the margin is initial_margin (0.3 m),
+    # raised to the leg's own deviation once that exceeds it (the transient leg).
+    steps = mission(node_of(margin='learned_bound', initial_margin=0.3), 3)
+    first, _ = steps[1]
+    assert first.margin_mode == 'learned_bound' and first.leg_margin == pytest.approx(0.3)
+    transient, _ = steps[STEPS_PER_LEG - 1]
+    assert transient.margin == pytest.approx(TRANSIENT + 0.5) and transient.violations == 1
+    assert all(np.isfinite(s.margin) for s, _ in steps)
+
+
+def test_the_gain_rebuilt_from_the_state_is_the_controllers():
+    from rrtq_controller.config import ControllerConfig
+    from rrtq_controller.q_learning import QLearningController
+    from rrtq_planner.conversions import actor_gain
+    ctrl = QLearningController(ControllerConfig(time_powers=(1, 2)), 4, 2, 0,
+                               np.random.default_rng(0))
+    ctrl._Wa = np.random.default_rng(1).normal(size=ctrl._Wa.shape)
+    basis = ctrl.time_basis
+    gain = actor_gain(ctrl.actor_weights, basis.rates, basis.powers, basis.horizon, 4, 2)
+    for tau in (10.0, 6.3, 0.7, 0.0, -1.0):
+        np.testing.assert_allclose(gain(tau), ctrl.gain(tau), rtol=1e-12, atol=1e-12)
+    assert actor_gain([], basis.rates, basis.powers, basis.horizon, 4, 2) is None
