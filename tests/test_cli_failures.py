@@ -45,6 +45,9 @@ BAD = {
                                           '{variant: robust}'), 'controller.gamma'),
     'unknown planner key': (GOOD.replace('duration: 600.0', 'duration: 600.0\nplanner: {delta: 2}'),
                             'planner.delta'),
+    'missing calibration file': (GOOD.replace('duration: 600.0', 'duration: 600.0\nsafety: '
+                                              '{margin: conformal, calibration: gone.json}'),
+                                 'safety.calibration'),
 }
 
 

@@ -75,6 +75,10 @@ def _parser() -> argparse.ArgumentParser:
                         help='runs at a time (default: the number of cores)')
     parser.add_argument('--obstacles', type=_count(0), default=LayoutConfig.obstacles,
                         help=f'obstacles per layout ({LayoutConfig.obstacles})')
+    parser.add_argument('--keep-obstacles', action='store_true',
+                        help="keep the base scenario's obstacles and add the layout's to them "
+                        '(a demo such as narrow_gap.yaml; the optimum path / layout check '
+                        'then ignore the kept ones)')
     parser.add_argument('--out', type=pathlib.Path,
                         help='directory of monte_carlo.md and .json (default: the runs '
                         'directory)')
@@ -136,7 +140,7 @@ def _configurations(args: argparse.Namespace, base: Scenario, document: dict[str
 
 
 def _prepare(conf: Configuration, seeds: range, config: LayoutConfig,
-             layouts: dict[tuple, Layout]) -> list[Job]:
+             layouts: dict[tuple, Layout], keep: bool = False) -> list[Job]:
     """Draw every seed's layout, then write its scenario file and check it as a run would.
 
     ``layouts`` caches them across configurations: a layout depends on the seed and
@@ -156,7 +160,7 @@ def _prepare(conf: Configuration, seeds: range, config: LayoutConfig,
         path = out / 'scenario.yaml'
         name = (f'{base.name}-cfg-{conf.index:02d}-seed-{layout.seed:03d}' if conf.overrides
                 else f'{base.name}-seed-{layout.seed:03d}')
-        doc = layout_scenario(conf.document, layout, name)
+        doc = layout_scenario(conf.document, layout, name, keep)
         path.write_text(f'# rrtq bench: {base.path} with the random layout of seed '
                         f'{layout.seed}'
                         + (f'; --set {conf.label}' if conf.overrides else '') + '\n'
@@ -230,7 +234,7 @@ def main(argv: list[str] | None = None) -> int:
             raise BadInput(f'{earlier[0]} exists (an earlier bench); choose another --runs or '
                            'pass --overwrite')
         layouts: dict[tuple, Layout] = {}
-        jobs = [job for conf in confs for job in _prepare(conf, seeds, config, layouts)]
+        jobs = [job for conf in confs for job in _prepare(conf, seeds, config, layouts, args.keep_obstacles)]
         scheduler, engine_text = _engine(args, jobs)
     except (ScenarioError, BadInput, LayoutError, SweepError, RayUnavailable) as exc:
         print(f'rrtq bench: error: {exc}', file=sys.stderr)

@@ -222,10 +222,15 @@ def generate_layout(scenario: Scenario, seed: int, config: LayoutConfig = Layout
                       f'draws (seed {seed}); fewer or smaller obstacles may do')
 
 
-def layout_scenario(document: dict[str, Any], layout: Layout, name: str) -> dict[str, Any]:
-    """The base scenario document with the layout's obstacles, the seed and a run name."""
+def layout_scenario(document: dict[str, Any], layout: Layout, name: str,
+                    keep: bool = False) -> dict[str, Any]:
+    """The base scenario document with the layout's obstacles, the seed and a run name.
+
+    ``keep``: the base's own obstacles stay, the layout's are added to them.
+    """
     out = copy.deepcopy(document)
     out['name'] = name
     out['seed'] = layout.seed
-    out['obstacles'] = [copy.deepcopy(e) for e in layout.obstacles]
+    kept = list(out.get('obstacles') or []) if keep else []
+    out['obstacles'] = kept + [copy.deepcopy(e) for e in layout.obstacles]
     return out

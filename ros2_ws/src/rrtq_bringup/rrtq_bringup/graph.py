@@ -95,8 +95,9 @@ def build_graph(scenario: Scenario, speed: float, output: str) -> list[NodeSpec]
             subscribes=clock + (topics.ODOM, topics.SAFETY_STATUS)))
         others.append(NodeSpec(
             'safety', 'rrtq_planner.safety_node', 'SafetyNode',
-            {**sim_time, **world, **only(run, 'dt', 'lockstep'),
-             **to_parameters(scenario.safety, exclude=('robot_radius',))},
+            {**sim_time, **world, **dims, **only(run, 'dt', 'lockstep'),
+             **to_parameters(scenario.safety, exclude=('robot_radius',)),
+             **to_parameters(scenario.margins)},
             subscribes=clock + (topics.ODOM, topics.PERCEPTION_STATUS,
                                 topics.CONTROLLER_STATE)))
     # The first step waits until every reader of the per-step topics is connected,

@@ -26,8 +26,9 @@ from collections.abc import Iterator
 
 import yaml
 
-from rrtq_bringup.graph import NodeSpec, build_graph
+from rrtq_bringup.graph import NodeSpec, build_graph, closed_loop
 from rrtq_bringup.mission import MissionConfig, MissionMonitor, Outcome
+from rrtq_bringup.run_calibration import write_run_calibration
 from rrtq_bringup.scenario import Scenario
 from rrtq_common.world import TrueObstacles
 from rrtq_controller.config import Variant
@@ -293,6 +294,17 @@ class Run:
             context.try_shutdown()
 
     # -- summary --------------------------------------------------------------------------
+    def _write_calibration(self) -> str | None:
+        """The run's leg scores beside its recording (a later run's safety.calibration)."""
+        recording = self.out / 'run.mcap'
+        if not closed_loop(self.scenario) or not recording.exists():
+            return None
+        try:
+            return str(write_run_calibration(self.scenario, recording))
+        except Exception as exc:  # noqa: BLE001 - an unreadable partial recording
+            print(f'rrtq: no calibration file written ({exc})', file=sys.stderr)
+            return None
+
     def _write_summary(self, wall_s: float) -> int:
         summary = self.monitor.summary()
         first = getattr(self, 'first_step_wall', None)
@@ -313,5 +325,6 @@ class Run:
             summary['success'] = self.monitor.outcome is Outcome.DURATION
         code = EXIT_SUCCESS if summary['success'] else EXIT_FAILED
         summary['exit_code'] = code
+        summary['calibration'] = self._write_calibration()
         (self.out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
         return code

@@ -175,6 +175,29 @@ ERRORS = [
     ({'controller': {'R': [[1, 0.5], [0, 1]]}}, 'controller.R', 'symmetric'),
     ({'controller': {'P_T': -1}}, 'controller.P_T', '>= 0'),
     ({'controller': {'rho': 0}}, 'controller.rho', '> 0'),
+    ({'safety': {'margin': 'max'}}, 'safety.margin', 'running_max, conformal, learned_bound'),
+    ({'safety': {'confidence': 1.0}}, 'safety.confidence', '< 1'),
+    ({'safety': {'confidence': 0}}, 'safety.confidence', '> 0'),
+    ({'safety': {'window': 0}}, 'safety.window', '>= 1'),
+    ({'safety': {'window': 2.5}}, 'safety.window', 'integer'),
+    ({'safety': {'initial_margin': -0.1}}, 'safety.initial_margin', '>= 0'),
+    ({'safety': {'initial_margin': 'big'}}, 'safety.initial_margin', 'number'),
+    ({'safety': {'delta': 0.1}}, 'safety.delta', 'allowed: margin'),
+    ({'safety': [1]}, 'safety', 'mapping'),
+    ({'safety': {'calibration': 'scores.json'}}, 'safety.calibration', 'only for margin: conformal'),
+    ({'safety': {'margin': 'conformal', 'calibration': 'nope.json'}}, 'safety.calibration', 'cannot read'),
+    ({'disturbance': {'model': 'field'}}, 'disturbance.bumps', 'non-empty list'),
+    ({'disturbance': {'model': 'field', 'bumps': [{'center': [0, 0], 'value': [1, 0]}]}},
+     'disturbance.bumps[0].radius', 'required'),
+    ({'disturbance': {'model': 'field', 'bumps': [{'center': [0, 0], 'radius': 0, 'value': [1, 0]}]}},
+     'disturbance.bumps[0].radius', '> 0'),
+    ({'disturbance': {'model': 'field', 'bumps': [{'center': [0], 'radius': 1, 'value': [1, 0]}]}},
+     'disturbance.bumps[0].center', '[x, y]'),
+    ({'disturbance': {'model': 'field', 'bumps': [{'center': [0, 0], 'radius': 1, 'value': [1, 0], 'sign': 1}]}},
+     'disturbance.bumps[0].sign', 'allowed'),
+    ({'disturbance': {'model': 'field', 'F': [[0], [0], [1], [0]], 'bumps': [{'center': [0, 0], 'radius': 1, 'value': [1, 0]}]}},
+     'disturbance.F', 'not for model field'),
+    ({'disturbance': {'model': 'constant', 'bumps': []}}, 'disturbance.bumps', 'only for model field'),
     ({'duration': 0}, 'duration', '> 0'),
     ({'perception_radius': -1}, 'perception_radius', '> 0'),
     ({'robot_radius': -0.1}, 'robot_radius', '>= 0'),
@@ -310,3 +333,49 @@ def test_scenario_appear_clearance_reaches_the_truth():
     assert [s.id for s in truth.update([-4.0, 0.0], 1.1)] == ['due']   # 0.5 m: clear
     with pytest.raises(ScenarioError, match='appear_clearance'):
         parse_scenario(base | {'appear_clearance': -1.0}, 's.yaml')
+
+
+def test_safety_section_defaults_and_a_calibration_read_from_the_scenario_directory(tmp_path):
+    from rrtq_planner.margins.calibration import Calibration, write_calibration
+    from rrtq_planner.margins.policy import MarginMode
+    sc = parse()
+    assert sc.margins.margin is MarginMode.RUNNING_MAX and sc.margins.confidence == 0.95
+    assert sc.margins.window == 50 and sc.margins.initial_margin is None
+    write_calibration(tmp_path / 'scores.json', Calibration((0.2, 0.4)))
+    data = copy.deepcopy(BASE) | {'safety': {'margin': 'conformal', 'confidence': 0.9,
+                                             'window': 20, 'initial_margin': 0.3,
+                                             'calibration': 'scores.json'}}
+    sc = parse_scenario(data, str(tmp_path / 'mission.yaml'))
+    assert sc.margins.margin is MarginMode.CONFORMAL and sc.margins.window == 20
+    assert sc.margins.calibration == str(tmp_path / 'scores.json')
+    assert (sc.margins.confidence, sc.margins.initial_margin) == (0.9, 0.3)
+
+
+@pytest.mark.parametrize(('text', 'fragment'), [
+    ('{"format": "rrtq-margin-calibration", "version": 1, "scores": [0.1, -2]}', 'scores'),
+    ('{"format": "rrtq-margin-calibration", "version": 3, "scores": []}', 'version 3'),
+    ('{"scores": [0.1', 'not a JSON'),
+])
+def test_bad_calibration_file_names_the_scenario_key_and_the_file(tmp_path, text, fragment):
+    (tmp_path / 'scores.json').write_text(text)
+    data = copy.deepcopy(BASE) | {'safety': {'margin': 'conformal',
+                                             'calibration': 'scores.json'}}
+    with pytest.raises(ScenarioError) as info:
+        parse_scenario(data, str(tmp_path / 'mission.yaml'))
+    assert info.value.key == 'safety.calibration'
+    assert str(tmp_path / 'scores.json') in info.value.message and fragment in info.value.message
+
+
+def test_field_disturbance_is_the_sum_of_its_bumps_where_the_robot_is():
+    sc = parse(disturbance={'model': 'field', 'bumps': [
+        {'center': [1.0, 2.0], 'radius': 2.0, 'value': [0.5, -0.25]},
+        {'center': [-3.0, 0.0], 'radius': 1.0, 'value': [0.0, 1.0]}]})
+    assert sc.disturbance.model is DisturbanceModel.FIELD and sc.disturbance.q == 2
+    np.testing.assert_array_equal(sc.disturbance.F, [[0, 0], [0, 0], [1, 0], [0, 1]])
+    gen = build_disturbance(sc, np.random.default_rng(0))
+    # At a centre the bump's value; at half its radius exp(1 - 1/(1 - 1/4)) = e^(-1/3) of it.
+    np.testing.assert_allclose(gen.value_at(0.0, [1.0, 2.0, 5.0, 5.0], [9.0, 9.0], 3.0),
+                               [0.5, -0.25])
+    np.testing.assert_allclose(gen.value_at(7.0, [-3.0, 0.5, 0.0, 0.0], None, 0.0),
+                               [0.0, math.exp(-1.0 / 3.0)])
+    np.testing.assert_array_equal(gen.value_at(0.0, [5.0, 5.0, 0.0, 0.0], None, 0.0), [0, 0])

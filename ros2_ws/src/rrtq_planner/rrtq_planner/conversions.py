@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
 import numpy as np
+import numpy.typing as npt
 from geometry_msgs.msg import Point
 from rrtq_msgs.msg import ControllerState, PlannerStats, SafetyStatus
 from std_msgs.msg import ColorRGBA, Header
@@ -10,6 +13,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from rrtq_common.conversions import MAP_FRAME, time_msg
 
+from .margins.policy import LegInfo, MarginSample, MarginStatus
 from .rrtx_config import PlanStatus
 from .safety import Leg, SafetyStep
 from .session import Cycle
@@ -50,11 +54,56 @@ def leg_of(state: ControllerState | None) -> Leg | None:
                (state.leg_target.x, state.leg_target.y), state.d0)
 
 
-def safety_status_msg(header: Header, step: SafetyStep) -> SafetyStatus:
+def safety_status_msg(header: Header, step: SafetyStep, margin: MarginStatus) -> SafetyStatus:
     """/safety/status of one step; ``augmented_stamp`` names the latest augmented set."""
     status = SafetyStatus(
         d_rob=step.d_rob, d_rob_max=step.d_rob_max, margin=step.margin,
         min_clearance=step.clearance, nearest_obstacle=step.nearest, collision=step.collision,
-        leg_index=step.leg_index, augmented_stamp=time_msg(step.augmented_stamp_ns))
+        leg_index=step.leg_index, augmented_stamp=time_msg(step.augmented_stamp_ns),
+        # int() and float(): the policies' counts may be numpy scalars, which the C
+        # conversion of a uint32 field rejects.
+        margin_mode=margin.mode.value, leg_margin=float(margin.leg_margin),
+        bound=float(margin.bound), confidence=float(margin.confidence),
+        samples=int(margin.samples), violations=int(margin.violations),
+        bound_violations=int(margin.bound_violations),
+        leg_deviation=float(margin.leg_deviation), legs=int(margin.legs))
     status.header = header
     return status
+
+
+def actor_gain(weights: npt.ArrayLike, rates: Sequence[float], powers: Sequence[float],
+               horizon: float, n: int, m: int) -> Callable[[float], np.ndarray] | None:
+    """K̂(τ) (m x n) of the actor's weights Ŵa ((L n) x m, flat), u = −K̂(τ)x̄ + probing.
+
+    The time basis is the controller's as /controller/state reports it: exp(−λ τ) for each
+    rate, then (τ / T)^k for each power, τ clipped at 0. None when the weights do not fit it
+    (no actor: open loop, or before the first state).
+    """
+    w = np.asarray(weights, dtype=float)
+    lam, k = np.asarray(rates, dtype=float), np.asarray(powers, dtype=float)
+    size = lam.size + k.size
+    if size == 0 or w.size != size * n * m or horizon <= 0.0:
+        return None
+    table = w.reshape(size, n, m)
+
+    def gain(tau: float) -> np.ndarray:
+        t = max(tau, 0.0)
+        phi = np.concatenate([np.exp(-lam * t), (t / horizon) ** k])
+        return np.asarray(-np.einsum('l,lij->ji', phi, table))
+    return gain
+
+
+def margin_sample(t: float, x: np.ndarray, state: ControllerState | None, n: int, m: int,
+                  gain: bool) -> MarginSample:
+    """What the margin policy is fed at a step: the state, and the controller's of the step before.
+
+    ``gain``: reconstruct K̂(τ) (learned_bound only: the others do not read it).
+    """
+    if state is None:
+        return MarginSample(t, x)
+    leg = LegInfo(int(state.leg_index), np.array([state.leg_start.x, state.leg_start.y]),
+                  np.array([state.leg_target.x, state.leg_target.y]), float(state.d0))
+    k = (actor_gain(state.actor_weights, state.time_rates, state.time_powers, state.horizon,
+                    n, m) if gain else None)
+    return MarginSample(t, x, leg, np.asarray(state.command, dtype=float),
+                        np.asarray(state.probing_noise, dtype=float), k, float(state.horizon))

@@ -95,8 +95,9 @@ class SafetyConfig:
 
     robot_radius: float = setting(0.0, unit='m', low=0.0, doc='added to every margin')
     growth_threshold: float = setting(0.05, unit='m', low=0.0, doc='the augmented set is '
-                                      'republished when the margin has grown by at least this '
-                                      'since the last publication')
+                                      'republished when the margin has changed (grown, or '
+                                      'shrunk under safety.margin conformal or learned_bound) '
+                                      'by at least this since the last publication')
 
     def __post_init__(self) -> None:
         check(self)
@@ -156,11 +157,24 @@ class SafetyMonitor:
         self._published = PolygonSet([])
         self._augmented_stamp = 0
         self._existing = LivePolygons()
+        self._policy_margin: float | None = None
 
     @property
     def margin(self) -> float:
-        """Current growth (m): max D_rob + robot radius."""
-        return self.d_rob_max + self.config.robot_radius
+        """Current growth (m): max D_rob (or the margin policy's) + robot radius."""
+        base = self.d_rob_max if self._policy_margin is None else self._policy_margin
+        return base + self.config.robot_radius
+
+    def follow(self, d_rob: float, d_rob_max: float, margin: float) -> bool:
+        """Take the margin from a margin policy (:mod:`rrtq_planner.margins`) at this step.
+
+        True when the margin has moved, up or down, by the growth threshold since the last
+        publication: a margin that shrinks gives back the space it took (the planner
+        restores the edges the smaller obstacles no longer block).
+        """
+        self.d_rob, self.d_rob_max, self._policy_margin = d_rob, d_rob_max, margin
+        return (self.published_margin is None or abs(self.margin - self.published_margin)
+                >= self.config.growth_threshold)
 
     def update(self, leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
                position: npt.ArrayLike) -> bool:
@@ -191,7 +205,7 @@ class SafetyMonitor:
         return out
 
     def step(self, stamp_ns: int, position: npt.ArrayLike, detected: OnChange[Obstacles] | None,
-             leg: Leg | None) -> SafetyStep:
+             leg: Leg | None, policy: tuple[float, float, float] | None = None) -> SafetyStep:
         """One step of the safety node (RRT-QX §5).
 
         Measure D_rob on the current leg; republish the augmented set when the margin has
@@ -208,6 +222,9 @@ class SafetyMonitor:
             The robot's map (id, polygon) as last published (None: none yet).
         leg : Leg, optional
             The controller's leg of the step before (None: none yet).
+        policy : (d_rob, d_rob_max, margin), optional
+            m: a margin policy's answer at this step (:meth:`follow`); None: the running
+            maximum of D_rob on ``leg`` (the paper's margin).
         """
         p = np.asarray(position, dtype=float)[:2]
         changed = detected is not None and detected.stamp_ns != self._detected_stamp
@@ -215,7 +232,9 @@ class SafetyMonitor:
             self._detected_stamp = detected.stamp_ns
             self._detected = detected.read()
         grown = False
-        if leg is not None and leg.d0 > 0.0:
+        if policy is not None:
+            grown = self.follow(*policy)
+        elif leg is not None and leg.d0 > 0.0:
             grown = self.update(leg.start, leg.target, p)
         swallowed = self._published.nearest(p)[0] < 0.0
         augmented = None

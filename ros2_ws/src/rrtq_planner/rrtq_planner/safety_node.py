@@ -1,11 +1,15 @@
 """Safety node: kinodynamic margin, augmented obstacles, true clearance (RRT-QX §2, §5).
 
-Each step (:meth:`rrtq_planner.safety.SafetyMonitor.step`): D_rob of the robot from its
-current leg (from the controller's state of the step before), its running maximum, and —
-when that maximum has grown or the detected set changed — every detected obstacle grown
-by max D_rob + robot radius, published on /obstacles/augmented (latched) so that the
-planner repairs its graph. It also watches the clearance to the true obstacles of the
-scenario and flags a collision the moment it happens; /safety/status goes out every step.
+Each step: D_rob of the robot from its current leg (from the controller's state of the
+step before) and the margin of the scenario's ``safety.margin`` policy
+(:mod:`rrtq_planner.margins`: the paper's running maximum by default, or a conformal or
+learned bound, ``docs/margins.md``); when that margin has moved by the growth threshold, up
+or down, or the detected set changed, every detected obstacle grown by margin + robot
+radius is published on /obstacles/augmented (latched) so that the planner repairs its graph
+(:meth:`rrtq_planner.safety.SafetyMonitor.step`). A leg whose deviation exceeds the margin
+in force for it is logged and counted. The node also watches the clearance to the true
+obstacles of the scenario and flags a collision the moment it happens; /safety/status goes
+out every step.
 """
 
 from __future__ import annotations
@@ -21,21 +25,32 @@ from rrtq_common import qos, topics
 from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
-from rrtq_common.run import RunConfig
+from rrtq_common.run import Dimensions, RunConfig
 from rrtq_common.world import TrueObstacles
 from rrtq_common.world_yaml import WorldSource, load_world
-from rrtq_planner.conversions import leg_of, safety_status_msg
+from rrtq_planner.conversions import leg_of, margin_sample, safety_status_msg
+from rrtq_planner.margins.build import MarginConfig, make_policy
+from rrtq_planner.margins.calibration import read_calibration
+from rrtq_planner.margins.policy import MarginMode
 from rrtq_planner.safety import SafetyConfig, SafetyMonitor
 
 
 class SafetyNode(Node):
-    """Grows the detected obstacles by the robot's measured deviation from its legs."""
+    """Grows the detected obstacles by the margin policy's bound on the deviation."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('safety', **kwargs)
         world = load_world(declare_config(self, WorldSource).scenario)
         run = declare_config(self, RunConfig, exclude=('seed',))
+        self.dims = declare_config(self, Dimensions)
         config = declare_config(self, SafetyConfig, robot_radius=world.robot_radius)
+        margins = declare_config(self, MarginConfig)
+        calibration = read_calibration(margins.calibration).scores if margins.calibration else ()
+        self.policy = make_policy(
+            margins.margin, region=world.bounds, dt=run.dt, confidence=margins.confidence,
+            window=margins.window, initial_margin=margins.initial_margin,
+            calibration=calibration, frame=margins.frame, n=self.dims.n, m=self.dims.m)
+        self.needs_gain = margins.margin is MarginMode.LEARNED_BOUND
         self.monitor = SafetyMonitor(config, TrueObstacles.for_scenario(world))
         self.aug_pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_AUGMENTED,
                                              qos.LATCHED)
@@ -53,17 +68,25 @@ class SafetyNode(Node):
             Input('state', ControllerState, topics.CONTROLLER_STATE, qos.STREAM)))
 
     def step(self, step: Step) -> None:
-        odom, detected = step['odom'], step.get('detected')
-        position = conv.odometry_state(odom)[:2]
-        done = self.monitor.step(step.stamp_ns, position, conv.changed_obstacles(detected),
-                                 leg_of(step.get('state')))
+        odom, detected, state = step['odom'], step.get('detected'), step.get('state')
+        x = conv.odometry_state(odom)
+        margin = self.policy.step(margin_sample(step.stamp_ns * 1e-9, x, state, self.dims.n,
+                                                self.dims.m, self.needs_gain))
+        if margin.violation:
+            self.get_logger().warning(
+                f'leg {margin.legs}: deviation {margin.leg_deviation:.3f} m above the margin '
+                f'{margin.leg_margin:.3f} m in force for it at t={step.stamp_ns * 1e-9:.2f} s '
+                f'({margin.mode}; violation {margin.violations}): the margin is raised for '
+                'the rest of the leg')
+        done = self.monitor.step(step.stamp_ns, x[:2], conv.changed_obstacles(detected),
+                                 leg_of(state), (margin.d_rob, margin.d_rob_max, margin.margin))
         if done.augmented is not None:
             self.aug_pub.publish(conv.obstacle_array_msg(step.stamp_ns, done.augmented,
                                                          done.margin))
         if done.new_collision:
             self.get_logger().error(f'collision with {done.nearest} at t={step.stamp_ns * 1e-9:.2f}'
-                                    f' s, ({position[0]:.2f}, {position[1]:.2f})')
-        status = safety_status_msg(odom.header, done)
+                                    f' s, ({x[0]:.2f}, {x[1]:.2f})')
+        status = safety_status_msg(odom.header, done, margin)
         self.gate.answered(step.stamp_ns, status)
         self.status_pub.publish(status)
 

@@ -466,3 +466,24 @@ def test_path_bias_samples_about_the_paths_bends_and_widens_the_ball():
     # Against the same planner with uniform samples (some biased samples are
     # steered, fall in obstacles or settle on other bends): clearly more at bends.
     assert shares[0.3] > 1.3 * shares[0.0], shares
+
+
+def test_an_obstacle_that_shrinks_under_its_id_gives_its_edges_back():
+    # The safety node's margin can shrink (conformal, learned_bound): the same id comes
+    # back smaller, and the edges only the larger polygon blocked must be usable again.
+    planner = build(seed=8)
+    path = planner.path()
+    mid = path[len(path) // 2]
+    large, small = box(mid[0], mid[1], 3.0, 3.0), box(mid[0], mid[1], 0.5, 0.5)
+    planner.update_obstacles(added={"grown": large})
+    cost_large = planner.cost()
+    planner.update_obstacles(added={"grown": small})
+    gr = planner.graph
+    a, b = gr.pos[gr.ea[: gr.ne]], gr.pos[gr.eb[: gr.ne]]
+    blocked = np.zeros(gr.ne, dtype=bool)
+    for poly in [small, *STATIC.values()]:
+        blocked |= segments_hit_polygon(a, b, poly)
+    np.testing.assert_array_equal(np.isinf(gr.ecost[: gr.ne]), blocked)
+    assert_matches_dijkstra(planner)
+    assert planner.cost() <= cost_large
+    assert_path_clear(planner.path(), [small, *STATIC.values()])

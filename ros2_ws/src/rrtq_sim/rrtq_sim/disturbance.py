@@ -10,6 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from rrtq_common.settings import check, setting
+from rrtq_sim.field import Bump, DisturbanceField
 from rrtq_sim.riccati import RiccatiSolution, solve_riccati
 
 __all__ = ['DisturbanceModel', 'DisturbanceConfig', 'WorstCaseGame', 'DisturbanceGenerator',
@@ -31,6 +32,8 @@ class DisturbanceModel(enum.StrEnum):
     SINUSOID = 'sinusoid'
     GAUSSIAN = 'gaussian'
     WORST_CASE = 'worst_case'
+    FIELD = 'field'
+    """A position-dependent acceleration (:mod:`rrtq_sim.field`), F = [0; I2]."""
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -45,6 +48,9 @@ class DisturbanceConfig:
     frequency: float = setting(0.2, unit='Hz', low=0.0, doc='sinusoid frequency')
     gamma: float | None = setting(None, low=0.0, low_open=True,
                                   doc='worst_case: attenuation level of the game that defines d*')
+    bumps: tuple[tuple[float, ...], ...] = setting(
+        (), columns=5, doc='field: one row [center x, center y, radius, a_x, a_y] per bump '
+        '(m, m, m, m/s^2, m/s^2)')
 
     def __post_init__(self) -> None:
         check(self)
@@ -53,6 +59,11 @@ class DisturbanceConfig:
     def q(self) -> int:
         """Disturbance dimension."""
         return int(self.F.shape[1])
+
+    def field(self) -> DisturbanceField:
+        """The bumps as a :class:`rrtq_sim.field.DisturbanceField`."""
+        return DisturbanceField([Bump((row[0], row[1]), row[2], (row[3], row[4]))
+                                 for row in self.bumps])
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -98,6 +109,8 @@ class DisturbanceGenerator:
         Disturbance matrix for ``WORST_CASE``; defaults to ``riccati.F``.
     gamma : float, optional
         Attenuation level for ``WORST_CASE``; defaults to ``riccati.gamma``.
+    field : DisturbanceField, optional
+        The acceleration field for ``FIELD`` (d = a(p), q = 2).
     """
 
     def __init__(
@@ -110,8 +123,12 @@ class DisturbanceGenerator:
         riccati: RiccatiSolution | None = None,
         F: npt.ArrayLike | None = None,
         gamma: float | None = None,
+        field: DisturbanceField | None = None,
     ) -> None:
         self._model = DisturbanceModel(model)
+        if self._model is DisturbanceModel.FIELD and field is None:
+            raise ValueError('field needs its bumps')
+        self._field = field
         if q < 0:
             raise ValueError(f'q must be >= 0, got {q}')
         if not math.isfinite(amplitude):
@@ -173,6 +190,8 @@ class DisturbanceGenerator:
         model = self._model
         if model is DisturbanceModel.NONE:
             return np.zeros(self._q)
+        if model is DisturbanceModel.FIELD:
+            raise ValueError('the field depends on the position: use value_at')
         if model is DisturbanceModel.CONSTANT:
             return np.full(self._q, self._amplitude)
         if model is DisturbanceModel.SINUSOID:
@@ -199,6 +218,9 @@ class DisturbanceGenerator:
         state is taken as it is, with ``tau``.
         """
         xbar = np.array(x, dtype=float).reshape(-1)
+        if self._field is not None:
+            # The field acts where the robot is, held over the step like u (field.py).
+            return np.asarray(self._field.acceleration(xbar[:2]), dtype=float)
         if target is not None:
             xbar[:2] -= np.asarray(target, dtype=float)
         return self.value(t, xbar, tau)
@@ -212,5 +234,6 @@ def make_generator(config: DisturbanceConfig, rng: np.random.Generator,
         if game is None or config.gamma is None:
             raise ValueError('worst_case needs the game and gamma')
         riccati = game.riccati(config.F, config.gamma)
+    field = config.field() if config.model is DisturbanceModel.FIELD else None
     return DisturbanceGenerator(config.model, config.q, config.amplitude, config.frequency, rng,
-                                riccati=riccati, F=config.F, gamma=config.gamma)
+                                riccati=riccati, F=config.F, gamma=config.gamma, field=field)

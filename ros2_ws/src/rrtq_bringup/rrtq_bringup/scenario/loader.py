@@ -15,7 +15,7 @@ import numpy as np
 
 from rrtq_bringup.scenario.schema import Scenario
 from rrtq_bringup.scenario.sections import (read_controller, read_disturbance, read_planner,
-                                            read_plant)
+                                            read_plant, read_safety)
 from rrtq_common.world import World
 from rrtq_common.world_yaml import read_world
 from rrtq_common.yaml_reader import Reader, ScenarioError, read_yaml
@@ -31,7 +31,7 @@ __all__ = ['parse_scenario', 'load_scenario', 'build_plant', 'worst_case_game',
 _TOP_KEYS = (
     'name', 'seed', 'bounds', 'start', 'goal', 'duration', 'perception_radius',
     'robot_radius', 'appear_clearance', 'plant', 'disturbance', 'controller', 'planner',
-    'obstacles',
+    'obstacles', 'safety',
 )  # fmt: skip
 
 
@@ -80,6 +80,7 @@ def parse_scenario(data: Any, path: str) -> Scenario:
     disturbance = read_disturbance(r, data.get('disturbance'), plant.n, robust)
     controller = read_controller(r, ctrl_raw, plant, world)
     planner, safety, goal_tolerance = read_planner(r, data.get('planner'), world)
+    margins = read_safety(r, data.get('safety'), os.path.dirname(os.path.abspath(path)), plant)
     if disturbance.model is DisturbanceModel.WORST_CASE:
         assert disturbance.gamma is not None
         _check_game(r, 'disturbance.gamma', plant, controller, disturbance.F, disturbance.gamma)
@@ -90,7 +91,7 @@ def parse_scenario(data: Any, path: str) -> Scenario:
     return Scenario(path=path, name=name, seed=seed,
                     duration=r.setting(data, 'duration', Scenario), plant=plant,
                     disturbance=disturbance, controller=controller, planner=planner,
-                    safety=safety, goal_tolerance=goal_tolerance, **world_fields)
+                    safety=safety, margins=margins, goal_tolerance=goal_tolerance, **world_fields)
 
 
 def load_scenario(path: str | os.PathLike[str], seed: int | None = None) -> Scenario:

@@ -6,7 +6,8 @@ it configures — ``plant:`` :class:`rrtq_sim.plant.PlantConfig`, ``disturbance:
 :class:`rrtq_sim.disturbance.DisturbanceConfig`, ``controller:``
 :class:`rrtq_controller.config.ControllerConfig`, ``planner:``
 :class:`rrtq_planner.session.PlannerConfig` (and two settings it hands on: the safety
-node's ``growth_threshold``, the referee's ``goal_tolerance``).
+node's ``growth_threshold``, the referee's ``goal_tolerance``); ``safety:``
+:class:`rrtq_planner.margins.build.MarginConfig`.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from rrtq_bringup.mission import MissionConfig
 from rrtq_common.settings import like, setting
 from rrtq_common.world import World
 from rrtq_controller.config import ControllerConfig
+from rrtq_planner.margins.build import MarginConfig
 from rrtq_planner.safety import SafetyConfig
 from rrtq_planner.session import PlannerConfig
 from rrtq_sim.disturbance import DisturbanceConfig
@@ -42,6 +44,8 @@ class Scenario(World):
     plant, disturbance, controller, planner, safety
         The settings of the simulator's plant, the disturbance injector, the controller,
         the planner node and the safety node.
+    margins : MarginConfig
+        The ``safety:`` section: the safety node's margin policy.
     goal_tolerance : float
         m; the referee's distance to the goal that counts as reached.
     """
@@ -56,4 +60,5 @@ class Scenario(World):
     controller: ControllerConfig
     planner: PlannerConfig
     safety: SafetyConfig
+    margins: MarginConfig = MarginConfig()
     goal_tolerance: float = like(MissionConfig, 'goal_tolerance')

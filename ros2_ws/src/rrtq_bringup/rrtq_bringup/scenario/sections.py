@@ -7,6 +7,7 @@ shapes that depend on the plant, settings required by a variant or a model.
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import numpy as np
@@ -15,16 +16,23 @@ from rrtq_bringup.mission import MissionConfig
 from rrtq_common.world import World
 from rrtq_common.yaml_reader import Reader, field_default, frozen
 from rrtq_controller.config import ControllerConfig, Variant
+from rrtq_planner.margins.build import MarginConfig
+from rrtq_planner.margins.calibration import read_calibration
+from rrtq_planner.margins.learned import ModelFrame
+from rrtq_planner.margins.policy import MarginMode
 from rrtq_planner.safety import SafetyConfig
 from rrtq_planner.session import PlannerConfig
 from rrtq_sim.disturbance import DisturbanceConfig, DisturbanceModel
+from rrtq_sim.field import field_input_matrix
 from rrtq_sim.plant import PlantConfig, PlantModel, rover_matrices
 
-__all__ = ['read_plant', 'read_disturbance', 'read_controller', 'read_planner']
+__all__ = ['read_plant', 'read_disturbance', 'read_controller', 'read_planner', 'read_safety']
 
 _ROVER_KEYS = ('model', 'mass', 'stiffness', 'damping', 'spring_anchor', 'force_limit')
 _LTI_KEYS = ('model', 'A', 'B', 'spring_anchor', 'force_limit')
-_DIST_KEYS = ('model', 'F', 'amplitude', 'frequency', 'gamma')
+_DIST_KEYS = ('model', 'F', 'amplitude', 'frequency', 'gamma', 'bumps')
+_BUMP_KEYS = ('center', 'radius', 'value')
+_SAFETY_KEYS = ('margin', 'confidence', 'window', 'initial_margin', 'calibration')
 _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
@@ -76,6 +84,10 @@ def read_disturbance(r: Reader, raw: Any, n: int, needs_f: bool) -> DisturbanceC
     key = 'disturbance'
     data = r.mapping({} if raw is None else raw, key, _DIST_KEYS)
     model = _choice(r, data, 'model', DisturbanceConfig, key)
+    if model is DisturbanceModel.FIELD:
+        return _read_field(r, data, n)
+    if 'bumps' in data:
+        raise r.error('disturbance.bumps', f'only for model field, not {model}')
     if 'F' in data:
         f = r.matrix(data['F'], 'disturbance.F', (n, None))
     elif n == 4:
@@ -93,6 +105,58 @@ def read_disturbance(r: Reader, raw: Any, n: int, needs_f: bool) -> DisturbanceC
     return DisturbanceConfig(model=model, F=frozen(f), amplitude=amplitude,
                              frequency=r.setting(data, 'frequency', DisturbanceConfig, key),
                              gamma=gamma)
+
+
+def _read_field(r: Reader, data: dict[str, Any], n: int) -> DisturbanceConfig:
+    """``disturbance: {model: field, bumps: [...]}``: F is the field's E = [0; I2]."""
+    for name in ('F', 'amplitude', 'frequency', 'gamma'):
+        if name in data:
+            raise r.error(f'disturbance.{name}', 'not for model field (the field enters '
+                          'the velocity rows: F = [0; I2])')
+    if n < 4:
+        raise r.error('disturbance.model', f'field acts on state components 2, 3 (the '
+                      f'velocities): needs n >= 4, the plant has n = {n}')
+    raw = data.get('bumps')
+    key = 'disturbance.bumps'
+    if not isinstance(raw, list) or not raw:
+        raise r.error(key, 'expected a non-empty list of {center: [x, y], radius: r, '
+                      'value: [ax, ay]}')
+    bumps = []
+    for i, entry in enumerate(raw):
+        k = f'{key}[{i}]'
+        bump = r.mapping(entry, k, _BUMP_KEYS)
+        for name in _BUMP_KEYS:
+            if name not in bump:
+                raise r.error(f'{k}.{name}', 'required')
+        center = r.point(bump['center'], f'{k}.center')
+        radius = r.number(bump['radius'], f'{k}.radius', positive=True)
+        value = r.point(bump['value'], f'{k}.value')
+        bumps.append((float(center[0]), float(center[1]), radius,
+                      float(value[0]), float(value[1])))
+    return DisturbanceConfig(model=DisturbanceModel.FIELD, F=frozen(field_input_matrix(n)),
+                             bumps=tuple(bumps))
+
+
+def read_safety(r: Reader, raw: Any, base: str, plant: PlantConfig) -> MarginConfig:
+    """``safety:``: the margin policy; a calibration file is read now (path from ``base``)."""
+    key = 'safety'
+    data = r.mapping({} if raw is None else raw, key, _SAFETY_KEYS)
+    mode = _choice(r, data, 'margin', MarginConfig, key)
+    calibration = None
+    if data.get('calibration') is not None:
+        if mode is not MarginMode.CONFORMAL:
+            raise r.error('safety.calibration', f'only for margin: conformal, not {mode}')
+        file = r.string(data['calibration'], 'safety.calibration')
+        path = os.path.abspath(os.path.join(base, os.path.expanduser(file)))
+        try:
+            read_calibration(path)
+        except ValueError as exc:
+            raise r.error('safety.calibration', str(exc)) from None
+        calibration = path
+    values = {name: r.setting(data, name, MarginConfig, key)
+              for name in ('confidence', 'window', 'initial_margin')}
+    return MarginConfig(margin=mode, calibration=calibration,
+                        frame=ModelFrame(plant.spring_anchor.value), **values)
 
 
 def _forces(r: Reader, raw: Any, key: str) -> tuple[tuple[float, float, float], ...]:

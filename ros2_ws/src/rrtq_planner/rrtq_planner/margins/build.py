@@ -1,14 +1,39 @@
-"""One constructor for the three modes (what the safety node calls with the ``safety:`` keys)."""
+"""The ``safety:`` settings and one constructor for the three modes (what the safety node calls)."""
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
+
+from rrtq_common.settings import check, setting
 
 from .conformal import ConformalConfig
 from .learned import Bounds, LearnedBoundConfig, LearnedBoundPolicy, ModelFrame
 from .policy import ConformalPolicy, MarginMode, MarginPolicy, RunningMaxPolicy
 
-__all__ = ['make_policy']
+__all__ = ['MarginConfig', 'make_policy']
+
+
+@dataclasses.dataclass(frozen=True)
+class MarginConfig:
+    """The scenario's ``safety:`` section (``docs/scenarios.md``; ``docs/margins.md``)."""
+
+    margin: MarginMode = setting(MarginMode.RUNNING_MAX, doc='how the obstacles are grown: '
+                                 'running_max (the paper), conformal, learned_bound')
+    confidence: float = setting(0.95, low=0.0, high=1.0, low_open=True, high_open=True,
+                                doc='1 - delta: conformal coverage of the next leg; '
+                                'learned_bound: level of the simultaneous band')
+    window: int = setting(50, low=1, doc='legs kept (conformal scores, learned_bound data)')
+    initial_margin: float | None = setting(None, unit='m', low=0.0,
+                                           doc='margin while the evidence certifies none; '
+                                           'unset: the running max of D_rob')
+    calibration: str | None = setting(None, doc='calibration file of earlier runs '
+                                      '(absolute path; conformal: its scores fill the window)')
+    frame: ModelFrame = setting(ModelFrame.LEG_TARGET, doc='learned_bound: the one-step '
+                                "model's frame (plant.spring_anchor)")
+
+    def __post_init__(self) -> None:
+        check(self, finite=True)
 
 
 def make_policy(mode: MarginMode | str, *, region: Bounds, dt: float,

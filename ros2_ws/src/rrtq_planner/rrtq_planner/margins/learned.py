@@ -230,7 +230,7 @@ class LearnedBoundPolicy:
         return MarginStatus(self.mode, max(self._margin(), t.leg_max), self.leg_margin,
                             self.bank.level * c.prior_bound, c.confidence, self.samples,
                             self.misses + self.flagged, t.d_rob, t.d_rob_max, violation,
-                            self.bank.violations)
+                            self.bank.violations, t.leg_max, t.count)
 
     # ------------------------------------------------------------------ learning
     def _learn(self, state: np.ndarray, sample: MarginSample) -> bool:

@@ -107,6 +107,11 @@ class MarginStatus:
     """True at the step a deviation first exceeds the current leg's margin (log it)."""
     bound_violations: int = 0
     """learned_bound: residuals that exceeded the bound and raised it (Alg. 1, up at once)."""
+    leg_deviation: float = 0.0
+    """m, the current leg's largest D_rob so far: its score when it ends."""
+    legs: int = 0
+    """Legs measured so far, the current one included (a calibration file is read off
+    ``leg_deviation`` at the last step of each)."""
 
 
 class MarginPolicy(Protocol):
@@ -164,6 +169,11 @@ class LegTracker:
         self.previous_state = state.copy()
         return ended
 
+    @property
+    def count(self) -> int:
+        """Legs measured so far, the current one included."""
+        return len(self.scores) + (self.leg is not None)
+
     def finish(self) -> None:
         """Close the current leg (end of the run): its score joins :attr:`scores`."""
         if self.leg is not None:
@@ -187,8 +197,8 @@ class RunningMaxPolicy:
     def step(self, sample: MarginSample) -> MarginStatus:
         self.legs.update(sample)
         t = self.legs
-        return MarginStatus(self.mode, t.d_rob_max, t.d_rob_max, t.d_rob_max, 1.0,
-                            len(t.scores) + (t.leg is not None), 0, t.d_rob, t.d_rob_max)
+        return MarginStatus(self.mode, t.d_rob_max, t.d_rob_max, t.d_rob_max, 1.0, t.count, 0,
+                            t.d_rob, t.d_rob_max, leg_deviation=t.leg_max, legs=t.count)
 
 
 class ConformalPolicy:
@@ -245,4 +255,5 @@ class ConformalPolicy:
         return MarginStatus(
             self.mode, max(self.leg_margin, t.leg_max), self.leg_margin, self.quantile.margin,
             self.quantile.level, len(self.quantile.scores),
-            self.misses + self.flagged, t.d_rob, t.d_rob_max, violation)
+            self.misses + self.flagged, t.d_rob, t.d_rob_max, violation,
+            leg_deviation=t.leg_max, legs=t.count)

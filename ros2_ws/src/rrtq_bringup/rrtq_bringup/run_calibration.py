@@ -1,0 +1,49 @@
+"""A run's leg scores as a calibration file next to its recording (``docs/margins.md`` §3).
+
+The score of a leg is its largest deviation D_rob from its straight edge; /safety/status
+carries the current leg's largest deviation so far (``leg_deviation``) and the count of
+legs measured (``legs``), so the scores are read off the recording: the last
+``leg_deviation`` of each leg. A run started from a calibration (``safety.calibration``)
+writes the old scores followed by its own, as a robot carries its calibration from
+mission to mission.
+"""
+
+from __future__ import annotations
+
+import datetime
+import pathlib
+
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+from rrtq_bringup.scenario import Scenario
+from rrtq_common import topics
+from rrtq_planner.margins.calibration import Calibration, read_calibration, write_calibration
+
+__all__ = ['CALIBRATION_FILE', 'recorded_scores', 'write_run_calibration']
+
+CALIBRATION_FILE = 'calibration.json'
+
+
+def recorded_scores(recording: str | pathlib.Path) -> list[float]:
+    """The leg scores (m, oldest first) of a recording's /safety/status."""
+    factory = DecoderFactory()
+    last: dict[int, float] = {}
+    with open(recording, 'rb') as f:
+        for schema, channel, raw in make_reader(f).iter_messages(topics=[topics.SAFETY_STATUS],
+                                                                 log_time_order=True):
+            msg = factory.decoder_for(channel.message_encoding, schema)(raw.data)
+            if msg.legs > 0:
+                last[int(msg.legs)] = float(msg.leg_deviation)
+    return [last[k] for k in sorted(last)]
+
+
+def write_run_calibration(scenario: Scenario, recording: pathlib.Path) -> pathlib.Path:
+    """Write ``calibration.json`` beside ``recording``: the scenario's calibration, then this run's."""
+    base = (read_calibration(scenario.margins.calibration) if scenario.margins.calibration
+            else Calibration(()))
+    created = datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%dT%H:%M:%SZ')
+    out = recording.parent / CALIBRATION_FILE
+    write_calibration(out, base.extended(recorded_scores(recording),
+                                         f'{scenario.name} seed {scenario.seed}', created))
+    return out
