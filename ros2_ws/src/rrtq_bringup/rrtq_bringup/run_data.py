@@ -7,6 +7,7 @@ message packages), so a recording can be read on a machine without this workspac
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 import pathlib
 
 import numpy as np
@@ -58,6 +59,7 @@ class RunData:
     topics: dict[str, int]
     time_rates: list[float] = dataclasses.field(default_factory=list)   # controller's basis
     time_powers: list[float] = dataclasses.field(default_factory=list)
+    states: list[Any] = dataclasses.field(default_factory=list)   # /controller/state, in time
 
 
 # Topics read_run decodes; every other topic is only counted.
@@ -136,7 +138,8 @@ def read_run(path: str | pathlib.Path) -> RunData:
         truth=series['truth'], detected=series['detected'], augmented=series['augmented'],
         plans=series['plan'], tree_segments=_tree_segments(tree), goal=goal, topics=topics,
         time_rates=list(getattr(states[-1], 'time_rates', [])) if states else [],
-        time_powers=list(getattr(states[-1], 'time_powers', [])) if states else [])
+        time_powers=list(getattr(states[-1], 'time_powers', [])) if states else [],
+        states=states)
 
 
 def _tree_segments(msg) -> np.ndarray | None:

@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import numpy as np
-from geometry_msgs.msg import Point
-from rrtq_msgs.msg import ControllerState, PlannerStats, SafetyStatus
+from geometry_msgs.msg import Point, Vector3
+from rrtq_msgs.msg import ControllerState, GuidanceReference, PlannerStats, SafetyStatus
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from rrtq_common.conversions import MAP_FRAME, time_msg
 
+from .guidance import GuidanceOutput
 from .rrtx_config import PlanStatus
 from .safety import Leg, SafetyStep
 from .session import Cycle
@@ -58,3 +59,17 @@ def safety_status_msg(header: Header, step: SafetyStep) -> SafetyStatus:
         leg_index=step.leg_index, augmented_stamp=time_msg(step.augmented_stamp_ns))
     status.header = header
     return status
+
+
+def reference_msg(stamp_ns: int, out: GuidanceOutput) -> GuidanceReference:
+    """/guidance/reference of one cycle: samples every dt from the step's stamp."""
+    ref = out.reference
+    dt = float(ref.t[1] - ref.t[0]) if len(ref.t) > 1 else 0.0
+    msg = GuidanceReference(
+        status=str(out.status), dt=dt, rollout=out.rollout,
+        positions=[Point(x=float(x), y=float(y)) for x, y in ref.positions],
+        velocities=[Vector3(x=float(x), y=float(y)) for x, y in ref.velocities],
+        obstacles_stamp=time_msg(out.obstacles_stamp_ns), plan_stamp=time_msg(out.plan_stamp_ns))
+    msg.header.stamp = time_msg(stamp_ns)
+    msg.header.frame_id = MAP_FRAME
+    return msg
