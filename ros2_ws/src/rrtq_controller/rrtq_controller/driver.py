@@ -13,6 +13,7 @@ from __future__ import annotations
 import abc
 import dataclasses
 import enum
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -247,10 +248,18 @@ class OpenLoopDriver(Driver):
             event=LegEvent.CONTINUE.value)
 
 
-DRIVERS: dict[Variant, type[Driver]] = {
+def _vf_lpc_driver(config: ControllerConfig, n: int, m: int, q: int,
+                   rng: np.random.Generator, **extra: Any) -> Driver:
+    # Imported when needed: the vf_lpc driver is a Driver, so it imports this module.
+    from .vf_lpc.driver import VFLPCDriver
+    return VFLPCDriver(config, n, m, q, rng, **extra)
+
+
+DRIVERS: dict[Variant, Callable[..., Driver]] = {
     Variant.NOMINAL: LearningDriver,
     Variant.ROBUST: LearningDriver,
     Variant.OPEN_LOOP: OpenLoopDriver,
+    Variant.VF_LPC: _vf_lpc_driver,
 }
 """The driver of each controller variant: a new variant registers its own here."""
 
@@ -258,8 +267,4 @@ DRIVERS: dict[Variant, type[Driver]] = {
 def make_driver(config: ControllerConfig, n: int, m: int, q: int,
                 rng: np.random.Generator, **extra: Any) -> Driver:
     """The driver of ``config.variant`` (``extra``: its own settings, e.g. vf_lpc's ``lpc``)."""
-    if config.variant is Variant.VF_LPC:
-        # Imported here: the vf_lpc driver is a Driver, so it imports this module.
-        from .vf_lpc.driver import VFLPCDriver
-        return VFLPCDriver(config, n, m, q, rng, **extra)
-    return DRIVERS[config.variant](config, n, m, q, rng)
+    return DRIVERS[config.variant](config, n, m, q, rng, **extra)
