@@ -124,7 +124,7 @@ def plot_map(data: RunData, scenario: dict, path: pathlib.Path) -> None:
                 ax.add_patch(Circle(xy[k], radius, fill=False, ec='tab:blue', alpha=0.25,
                                     ls=':'))
         ax.plot(*xy[0], 'o', color='tab:blue', ms=8, label='start')
-    if data.leg_target.size:
+    if data.leg_target.size and not is_vf_lpc(data):   # vf_lpc's 'leg' moves every step
         targets = np.unique(data.leg_target, axis=0)
         ax.plot(targets[:, 0], targets[:, 1], 'x', color='k', ms=6, label='leg targets')
     if data.goal is not None:

@@ -97,10 +97,12 @@ class Driver(abc.ABC):
         """What the node should warn about at start (gains against the stability bounds)."""
         return []
 
-    def set_guidance(self, reference: OnChange[tuple[Array, int]] | None,
+    def set_guidance(self, reference: OnChange[tuple[Array, int]] | None,  # noqa: B027
                      obstacles: OnChange[list[Array]] | None) -> None:
-        """Take the guidance reference (K, n) with its rollout count, and the augmented
-        obstacles (vf_lpc only; the other variants ignore them)."""
+        """Take the guidance reference (K, n) and its rollout count, and the obstacles.
+
+        vf_lpc only (the augmented obstacles carry its barrier); the others ignore them.
+        """
 
     @abc.abstractmethod
     def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> None:

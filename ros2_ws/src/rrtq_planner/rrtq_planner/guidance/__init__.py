@@ -15,6 +15,7 @@ from .session import GuidanceOutput, GuidanceSession, ReferenceStatus
 from .track import GuidanceTrack
 
 __all__ = ['CompositeField', 'Curve', 'CurveStatus', 'FilletedPath', 'GuidanceConfig',
-           'GuidanceMode', 'GuidanceOutput', 'GuidanceSession', 'GuidanceTrack', 'PathQuery', 'PolygonDistances', 'Reference', 'ReferenceStatus',
-           'RolloutState', 'VirtualObstacle', 'bump_weights', 'integral_curve',
-           'menger_curvature', 'place_virtual_obstacles', 'sample_in_time', 'speed_profile']
+           'GuidanceMode', 'GuidanceOutput', 'GuidanceSession', 'GuidanceTrack', 'PathQuery',
+           'PolygonDistances', 'Reference', 'ReferenceStatus', 'RolloutState',
+           'VirtualObstacle', 'bump_weights', 'integral_curve', 'menger_curvature',
+           'place_virtual_obstacles', 'sample_in_time', 'speed_profile']
