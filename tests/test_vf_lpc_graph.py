@@ -24,34 +24,35 @@ ROOT = pathlib.Path(__file__).resolve().parents[1]
 MODEL = ROOT / 'scenarios' / 'models' / 'rover_40kg.npz'
 LIMIT = 300.0
 
-SCENARIO = f"""
+SCENARIO = """
 name: vf-lpc-short
 seed: 3
-bounds: {{x: [-10, 10], y: [-10, 10]}}
+bounds: {x: [-10, 10], y: [-10, 10]}
 start: [-6.0, -6.0]
 goal: [6.0, 5.0]
-duration: {{duration}}
+duration: DURATION
 perception_radius: 5.0
 robot_radius: 0.3
-plant: {{model: rover, mass: 50.0, stiffness: 0.0}}
+plant: {model: rover, mass: 50.0, stiffness: 0.0}
 controller:
   variant: vf_lpc
-  model: {MODEL}
-  force_limit: {LIMIT}
-  vf_lpc: {{horizon_steps: 20}}
+  model: MODEL
+  force_limit: LIMIT
+  vf_lpc: {horizon_steps: 20}
 planner:
   steer_distance: 3.0
   iterations_per_step: 20
   max_nodes: 800
-  guidance: {{mode: gvf, a_max: 2.0, v_max: 2.0}}
+  guidance: {mode: gvf, a_max: 2.0, v_max: 2.0}
 obstacles:
-  - {{id: mid, circle: {{center: [0.0, -0.5], radius: 1.5}}, appear_at: 1.0}}
+  - {id: mid, circle: {center: [0.0, -0.5], radius: 1.5}, appear_at: 1.0}
 """
 
 
 def run(tmp, name, duration):
     path = tmp / f'{name}.yaml'
-    path.write_text(SCENARIO.format(duration=duration))
+    path.write_text(SCENARIO.replace('DURATION', str(duration)).replace('MODEL', str(MODEL))
+                    .replace('LIMIT', str(LIMIT)))
     out = tmp / name
     proc = subprocess.run([str(ROOT / 'scripts/rrtq'), 'run', str(path), '--out', str(out),
                            '--mode', 'composed'], capture_output=True, text=True, timeout=300)

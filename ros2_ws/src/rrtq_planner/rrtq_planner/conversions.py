@@ -61,12 +61,11 @@ def safety_status_msg(header: Header, step: SafetyStep) -> SafetyStatus:
     return status
 
 
-def reference_msg(stamp_ns: int, out: GuidanceOutput) -> GuidanceReference:
-    """/guidance/reference of one cycle: samples every dt from the step's stamp."""
+def reference_msg(stamp_ns: int, out: GuidanceOutput, dt: float) -> GuidanceReference:
+    """/guidance/reference of one cycle: samples every ``dt`` (s) from the step's stamp."""
     ref = out.reference
-    dt = float(ref.t[1] - ref.t[0]) if len(ref.t) > 1 else 0.0
     msg = GuidanceReference(
-        status=str(out.status), dt=dt, rollout=out.rollout,
+        status=str(out.status), dt=float(dt), rollout=out.rollout,
         positions=[Point(x=float(x), y=float(y)) for x, y in ref.positions],
         velocities=[Vector3(x=float(x), y=float(y)) for x, y in ref.velocities],
         obstacles_stamp=time_msg(out.obstacles_stamp_ns), plan_stamp=time_msg(out.plan_stamp_ns))

@@ -101,7 +101,7 @@ class PlannerNode(Node):
             out = self.guidance.cycle(step.stamp_ns * 1e-9, conv.odometry_state(odom),
                                       done.plan.waypoints, done.plan_stamp_ns,
                                       conv.changed_obstacles(step.get('augmented')))
-            reference = reference_msg(step.stamp_ns, out)
+            reference = reference_msg(step.stamp_ns, out, self.guidance.config.dt)
         self.gate.answered(step.stamp_ns, stats, reference)
         self._publish(stats, reference)
         if done.tree is not None:
