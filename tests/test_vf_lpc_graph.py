@@ -5,8 +5,8 @@ A short route round an obstacle that appears on the way, with a model identified
 identified on. Judged from the recording against the scenario's truth: the goal is
 reached without collision, no command beyond the actuator limit the scenario sets, the
 reference was published every step and the controller answered it; and a lock-step run
-repeats: a shorter run of the same file records the same /odom bytes as the first part
-of the longer one.
+repeats: a shorter run of the same file, one process per node, records the same /odom
+bytes as the first part of the longer, composed one.
 """
 
 import json
@@ -49,13 +49,13 @@ obstacles:
 """
 
 
-def run(tmp, name, duration):
+def run(tmp, name, duration, mode='composed'):
     path = tmp / f'{name}.yaml'
     path.write_text(SCENARIO.replace('DURATION', str(duration)).replace('MODEL', str(MODEL))
                     .replace('LIMIT', str(LIMIT)))
     out = tmp / name
     proc = subprocess.run([str(ROOT / 'scripts/rrtq'), 'run', str(path), '--out', str(out),
-                           '--mode', 'composed'], capture_output=True, text=True, timeout=300)
+                           '--mode', mode], capture_output=True, text=True, timeout=300)
     return proc, out
 
 
@@ -82,7 +82,7 @@ def test_vf_lpc_reaches_the_goal_within_the_limit_and_repeats(tmp_path):
     # 50 kg against a model of 40: the GP's mean cuts the one-step velocity error.
     assert vf['velocity_rmse_learned'] < 0.5 * vf['velocity_rmse_nominal']
 
-    short, out_short = run(tmp_path, 'short', 2.0)
+    short, out_short = run(tmp_path, 'short', 2.0, mode='processes')
     assert short.returncode == 1                # 2 s is too short to arrive
     first = odom(out_short)
     assert len(first) == 41 and first == odom(out)[:len(first)]
