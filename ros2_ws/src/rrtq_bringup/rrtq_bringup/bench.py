@@ -161,6 +161,8 @@ def _prepare(conf: Configuration, seeds: range, config: LayoutConfig,
         name = (f'{base.name}-cfg-{conf.index:02d}-seed-{layout.seed:03d}' if conf.overrides
                 else f'{base.name}-seed-{layout.seed:03d}')
         doc = layout_scenario(conf.document, layout, name, keep)
+        if base.controller.model:      # relative to the base file, which stays where it is
+            doc['controller']['model'] = base.controller.model
         path.write_text(f'# rrtq bench: {base.path} with the random layout of seed '
                         f'{layout.seed}'
                         + (f'; --set {conf.label}' if conf.overrides else '') + '\n'

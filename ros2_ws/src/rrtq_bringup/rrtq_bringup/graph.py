@@ -12,7 +12,9 @@ spawner (odom) -> safety (perception status, controller state of k-1) -> planner
 disturbance injector (controller state, worst case only) -> simulator (command,
 controller state, disturbance) -> step k+1. Outputs published only on change
 (detected map, augmented set, plan) are named by the stamp in the status that
-follows them, so a reader knows when to wait for one.
+follows them, so a reader knows when to wait for one. With ``planner.guidance.mode: gvf``
+the planner also publishes /guidance/reference every step; the vf_lpc controller waits
+for it (and for the augmented set it names) instead of following the plan.
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from rrtq_common.run import Dimensions, RunConfig
 from rrtq_common.settings import to_parameters
 from rrtq_common.world_yaml import WorldSource
 from rrtq_controller.config import Variant
+from rrtq_planner.guidance import GuidanceMode
 from rrtq_sim.disturbance import DisturbanceModel
 from rrtq_sim.simulation import SimulatorConfig
 
@@ -58,6 +61,8 @@ def build_graph(scenario: Scenario, speed: float, output: str) -> list[NodeSpec]
     plant, dist, ctrl = scenario.plant, scenario.disturbance, scenario.controller
     loop = closed_loop(scenario)
     robust = ctrl.variant is Variant.ROBUST
+    vf_lpc = ctrl.variant is Variant.VF_LPC
+    gvf = loop and scenario.guidance.mode is GuidanceMode.GVF
     worst_case = dist.model is DisturbanceModel.WORST_CASE
     run = to_parameters(RunConfig(dt=ctrl.dt, lockstep=speed == 0.0, seed=scenario.seed))
     dims = to_parameters(Dimensions(n=plant.n, m=plant.m, q=dist.q))
@@ -70,9 +75,11 @@ def build_graph(scenario: Scenario, speed: float, output: str) -> list[NodeSpec]
 
     controller = NodeSpec(
         'controller', 'rrtq_controller.controller_node', 'ControllerNode',
-        {**sim_time, **dims, **only(run, 'lockstep', 'seed'), **to_parameters(ctrl)},
+        {**sim_time, **dims, **only(run, 'lockstep', 'seed'), **to_parameters(ctrl),
+         **(to_parameters(scenario.lpc, exclude=('force_limit',)) if vf_lpc else {})},
         subscribes=clock + (topics.ODOM,) + ((topics.PLANNER_STATS,) if loop else ())
-        + ((topics.DISTURBANCE,) if robust else ()))
+        + ((topics.DISTURBANCE,) if robust else ())
+        + ((topics.GUIDANCE_REFERENCE,) if vf_lpc else ()))
     disturbance = NodeSpec(
         'disturbance_injector', 'rrtq_sim.disturbance_node', 'DisturbanceNode',
         {**sim_time, **dims, **only(run, 'seed'), **to_parameters(dist),
@@ -80,7 +87,8 @@ def build_graph(scenario: Scenario, speed: float, output: str) -> list[NodeSpec]
         subscribes=clock + (topics.ODOM,) + ((topics.CONTROLLER_STATE,) if worst_case else ()))
     spawner = NodeSpec('obstacle_spawner', 'rrtq_sim.spawner_node', 'SpawnerNode',
                        {**sim_time, **world}, subscribes=clock + (topics.ODOM,))
-    published = STEP_TOPICS if loop else STEP_TOPICS[:6]
+    published = (STEP_TOPICS if loop else STEP_TOPICS[:6]) + (
+        (topics.GUIDANCE_REFERENCE,) if gvf else ())
     recorder = NodeSpec('recorder', 'rrtq_bringup.recorder_node', 'RecorderNode',
                         to_parameters(RecorderConfig(output=output, scenario=scenario.path)),
                         subscribes=published)
@@ -91,7 +99,8 @@ def build_graph(scenario: Scenario, speed: float, output: str) -> list[NodeSpec]
     if loop:
         others.append(NodeSpec(
             'planner', 'rrtq_planner.planner_node', 'PlannerNode',
-            {**sim_time, **run, **to_parameters(scenario.planner)},
+            {**sim_time, **run, **to_parameters(scenario.planner),
+             **(to_parameters(scenario.guidance, exclude=('dt',)) if gvf else {})},
             subscribes=clock + (topics.ODOM, topics.SAFETY_STATUS)))
         others.append(NodeSpec(
             'safety', 'rrtq_planner.safety_node', 'SafetyNode',

@@ -5,6 +5,8 @@
   the traversed path, the perception disc along it, the leg targets;
 - ``timeseries.png``: forces, speed and distance to goal, disturbance, D_rob and its
   maximum, the learned weights (each panel only when its topics were recorded);
+- ``vf_lpc.png`` and the summary's ``vf_lpc`` entry for a vf_lpc run
+  (:mod:`rrtq_bringup.report_vf_lpc`);
 - ``summary.json``: path length, control effort, clearance against the true obstacles,
   time to goal, legs — from the recorded messages and the scenario embedded in the file.
 """
@@ -26,6 +28,7 @@ from rrtq_bringup.leg_table import LegTable, leg_table  # noqa: E402
 from rrtq_bringup.leg_table import summary as leg_summary  # noqa: E402
 from rrtq_bringup.run_data import RunData, embedded_scenario, read_run, recorded_scenario  # noqa: E402
 from rrtq_bringup.mission import MissionConfig  # noqa: E402
+from rrtq_bringup.report_vf_lpc import is_vf_lpc, plot_vf_lpc, vf_lpc_summary  # noqa: E402
 from rrtq_common.polygon_set import PolygonSet  # noqa: E402
 from rrtq_common.yaml_reader import field_default  # noqa: E402
 
@@ -125,7 +128,7 @@ def plot_map(data: RunData, scenario: dict, path: pathlib.Path) -> None:
                 ax.add_patch(Circle(xy[k], radius, fill=False, ec='tab:blue', alpha=0.25,
                                     ls=':'))
         ax.plot(*xy[0], 'o', color='tab:blue', ms=8, label='start')
-    if data.leg_target.size:
+    if data.leg_target.size and not is_vf_lpc(data):   # vf_lpc's 'leg' moves every step
         targets = np.unique(data.leg_target, axis=0)
         ax.plot(targets[:, 0], targets[:, 1], 'x', color='k', ms=6, label='leg targets')
     if data.goal is not None:
@@ -251,5 +254,8 @@ def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = N
                 'legs', 'median_ratio_last10', 'median_ratio_last10_complete',
                 'median_gain_error_last10', 'ratios_last10')}
             plot_legs(table, out / 'legs.png')
+    if is_vf_lpc(data):
+        summary['vf_lpc'] = vf_lpc_summary(data, scenario)
+        plot_vf_lpc(data, out / 'vf_lpc.png')
     (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
     return summary

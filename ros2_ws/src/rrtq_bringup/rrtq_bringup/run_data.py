@@ -7,6 +7,7 @@ message packages), so a recording can be read on a machine without this workspac
 from __future__ import annotations
 
 import dataclasses
+from typing import Any
 import pathlib
 
 import numpy as np
@@ -61,6 +62,7 @@ class RunData:
     force_limit: float = float('inf')        # the controller's actuator limit, N per axis
     policy_events: list[tuple[float, str, str]] = dataclasses.field(default_factory=list)
     """(t, event, reason) of every step the guard of safe learning acted at."""
+    states: list[Any] = dataclasses.field(default_factory=list)   # /controller/state, in time
 
 
 # Topics read_run decodes; every other topic is only counted.
@@ -143,7 +145,8 @@ def read_run(path: str | pathlib.Path) -> RunData:
         force_limit=float(getattr(states[-1], 'force_limit', 0.0) or float('inf')) if states else float('inf'),
         policy_events=[(_stamp(m.header), e, r) for m in states
                        if getattr(m, 'policy_event', '')
-                       for e, r in zip(m.policy_event.split(';'), m.policy_reason.split('; '))])
+                       for e, r in zip(m.policy_event.split(';'), m.policy_reason.split('; '))],
+        states=states)
 
 
 def _tree_segments(msg) -> np.ndarray | None:

@@ -30,6 +30,10 @@ class Variant(enum.StrEnum):
     OPEN_LOOP = 'open_loop'
     """No learning: a scripted force profile (``forces``), for plant tests."""
 
+    VF_LPC = 'vf_lpc'
+    """VF-LPC: the receding-horizon actor-critic on an identified model with online
+    sparse-GP compensation, tracking the guidance reference (``rrtq_controller.vf_lpc``)."""
+
 
 class CriticLaw(enum.StrEnum):
     """How the critic weights are tuned from the integral Bellman equations."""
@@ -94,7 +98,7 @@ class ControllerConfig:
     (None) is the controller's choice (:class:`Gains`).
     """
 
-    variant: Variant = setting(Variant.NOMINAL, doc='nominal | robust | open_loop')
+    variant: Variant = setting(Variant.NOMINAL, doc='nominal | robust | open_loop | vf_lpc')
     horizon: float = setting(10.0, unit='s', **_POSITIVE,
                              doc='T, the finite horizon of every leg (RRT-QX (2))')
     dt: float = setting(STEP_S, unit='s', **_POSITIVE, doc='Δt, the control period and '
@@ -211,6 +215,8 @@ class ControllerConfig:
         'piecewise constant from each t')
     goal: tuple[float, float] = setting((0.0, 0.0), unit='m', doc="open_loop: the run's goal, "
                                         'its leg target (D and D0 are measured to it)')
+    model: str = setting('', doc='vf_lpc: the nominal model file written by rrtq identify '
+                         '(absolute path; the scenario gives it relative to its file)')
     stale_timeout_s: float = setting(0.5, unit='s', low=0.0, doc='paced mode: wall time '
                                      'without odometry after which the controller commands '
                                      'zero force')

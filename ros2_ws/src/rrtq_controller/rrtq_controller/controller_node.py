@@ -8,7 +8,9 @@ along the plan) and ``open_loop`` (a scripted force profile): a
 In lock-step mode a step is processed only when its inputs are complete: the planner's
 statistics of the same step, and the plan they name when it changed (learning
 variants); the disturbance that acted over the previous step (robust variant, which
-learns the game from the measured disturbance). Paced mode uses whatever arrived last.
+learns the game from the measured disturbance); the guidance reference of the same step
+and the augmented obstacle set it names (vf_lpc, which tracks the reference and puts its
+barrier on those obstacles). Paced mode uses whatever arrived last.
 """
 
 from __future__ import annotations
@@ -20,17 +22,19 @@ import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
-from rrtq_msgs.msg import ControllerState, Disturbance, PlannerStats
+from rrtq_msgs.msg import (ControllerState, Disturbance, GuidanceReference, ObstacleArray,
+                           PlannerStats)
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
 from rrtq_common.inputs import Input, subscribe_inputs
-from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
+from rrtq_common.lockstep import OnChange, Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
 from rrtq_controller.config import ControllerConfig, Variant
-from rrtq_controller.conversions import command_msg, controller_state_msg
+from rrtq_controller.conversions import changed_reference, command_msg, controller_state_msg
 from rrtq_controller.driver import Watch, make_driver
+from rrtq_controller.vf_lpc import LPCConfig
 
 
 def _requirements(config: ControllerConfig) -> list[Requirement]:
@@ -41,6 +45,9 @@ def _requirements(config: ControllerConfig) -> list[Requirement]:
                                  names=lambda m: conv.stamp_ns(m.plan_stamp)))
     if config.variant is Variant.ROBUST:
         needs.append(Requirement('disturbance', lag=1))
+    if config.variant is Variant.VF_LPC:
+        needs.append(Requirement('reference', followup='augmented',
+                                 names=lambda m: conv.stamp_ns(m.obstacles_stamp)))
     return needs
 
 
@@ -52,8 +59,11 @@ class ControllerNode(Node):
         dims = declare_config(self, Dimensions)
         run = declare_config(self, RunConfig, exclude=('dt',))
         self.config = declare_config(self, ControllerConfig, dims)
+        vf_lpc = self.config.variant is Variant.VF_LPC
+        extra = ({'lpc': declare_config(self, LPCConfig, exclude=('force_limit',))}
+                 if vf_lpc else {})
         self.driver = make_driver(self.config, dims.n, dims.m, dims.q,
-                                  np.random.default_rng(run.seed))
+                                  np.random.default_rng(run.seed), **extra)
         for warning in self.driver.warnings:
             self.get_logger().warning(warning)
         self.state_pub = self.create_publisher(ControllerState, topics.CONTROLLER_STATE,
@@ -67,7 +77,10 @@ class ControllerNode(Node):
             Input('odom', Odometry, topics.ODOM, qos.STREAM),
             Input('plan', Path, topics.PLAN, qos.LATCHED),
             Input('stats', PlannerStats, topics.PLANNER_STATS, qos.STREAM),
-            Input('disturbance', Disturbance, topics.DISTURBANCE, qos.STREAM)))
+            Input('disturbance', Disturbance, topics.DISTURBANCE, qos.STREAM))
+            + ((Input('reference', GuidanceReference, topics.GUIDANCE_REFERENCE, qos.STREAM),
+                Input('augmented', ObstacleArray, topics.OBSTACLES_AUGMENTED, qos.LATCHED))
+               if vf_lpc else ()))
         if not run.lockstep:
             self.create_timer(0.05, self._watch_odometry)
 
@@ -85,8 +98,12 @@ class ControllerNode(Node):
         wall = time.perf_counter()
         odom, plan, dist = step['odom'], step.get('plan'), step.get('disturbance')
         t = step.stamp_ns * 1e-9
-        out = self.driver.control(t, conv.odometry_state(odom), conv.changed_path(plan),
-                                  None if dist is None else dist.value)
+        augmented = conv.changed_obstacles(step.get('augmented'))
+        out = self.driver.control(
+            t, conv.odometry_state(odom), conv.changed_path(plan),
+            None if dist is None else dist.value, changed_reference(step.get('reference')),
+            None if augmented is None else OnChange(
+                augmented.stamp_ns, lambda: [poly for _, poly in augmented.read()]))
         if out is None:
             self.get_logger().error(f'non-finite odometry at t={t:.2f} s: commanding zero',
                                     throttle_duration_sec=1.0)

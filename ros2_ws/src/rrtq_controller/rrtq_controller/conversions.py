@@ -6,9 +6,11 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, WrenchStamped
 from numpy.typing import ArrayLike
-from rrtq_msgs.msg import ControllerState
+from numpy.typing import NDArray
+from rrtq_msgs.msg import ControllerState, GuidanceReference
 
-from rrtq_common.conversions import MAP_FRAME, ROBOT_FRAME
+from rrtq_common.conversions import MAP_FRAME, ROBOT_FRAME, stamp_ns
+from rrtq_common.lockstep import OnChange
 
 from .config import ControllerConfig
 from .driver import ControlOutput
@@ -39,6 +41,11 @@ def controller_state_msg(stamp: Time, config: ControllerConfig,
         state.disturbance_weights = _floats(out.disturbance_weights)
         state.critic_error, state.terminal_error = out.critic_error, out.terminal_error
         state.policy_event, state.policy_reason = out.policy_event, out.policy_reason
+        state.tracking_error, state.horizon_cost = out.tracking_error, out.horizon_cost
+        state.prediction_error = _floats(out.prediction_error)
+        state.nominal_error = _floats(out.nominal_error)
+        state.prediction_std = _floats(out.prediction_std)
+        state.gp_dictionary = out.gp_dictionary
     state.header.stamp = stamp
     state.header.frame_id = MAP_FRAME
     return state
@@ -52,3 +59,18 @@ def command_msg(stamp: Time, u: ArrayLike) -> WrenchStamped:
     cmd.header.frame_id = ROBOT_FRAME
     cmd.wrench.force.x, cmd.wrench.force.y = float(force[0]), float(force[1])
     return cmd
+
+
+def reference_states(msg: GuidanceReference) -> NDArray[np.float64]:
+    """(K, 4) reference states p_x, p_y, v_x, v_y of /guidance/reference."""
+    return np.array([[p.x, p.y, v.x, v.y] for p, v in zip(msg.positions, msg.velocities,
+                                                          strict=True)],
+                    dtype=float).reshape(-1, 4)
+
+
+def changed_reference(msg: GuidanceReference | None
+                      ) -> OnChange[tuple[NDArray[np.float64], int]] | None:
+    """This step's reference as an input: its stamp; its states and rollout read on demand."""
+    if msg is None:
+        return None
+    return OnChange(stamp_ns(msg.header.stamp), lambda: (reference_states(msg), msg.rollout))

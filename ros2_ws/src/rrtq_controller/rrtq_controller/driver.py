@@ -13,6 +13,8 @@ from __future__ import annotations
 import abc
 import dataclasses
 import enum
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -50,6 +52,12 @@ class ControlOutput:
     time_powers: tuple[int, ...] = ()
     policy_event: str = ''               # the guard's events this step (guard.PolicyEvent)
     policy_reason: str = ''
+    tracking_error: float = 0.0          # vf_lpc: m, robot to the reference's first sample
+    prediction_error: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
+    nominal_error: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
+    prediction_std: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
+    gp_dictionary: int = 0
+    horizon_cost: float = 0.0
 
 
 class Watch(enum.Enum):
@@ -89,6 +97,13 @@ class Driver(abc.ABC):
         """What the node should warn about at start (gains against the stability bounds)."""
         return []
 
+    def set_guidance(self, reference: OnChange[tuple[Array, int]] | None,  # noqa: B027
+                     obstacles: OnChange[list[Array]] | None) -> None:
+        """Take the guidance reference (K, n) and its rollout count, and the obstacles.
+
+        vf_lpc only (the augmented obstacles carry its barrier); the others ignore them.
+        """
+
     @abc.abstractmethod
     def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> None:
         """Adopt the planner's waypoints (the robot's next waypoint first, the goal last)."""
@@ -98,8 +113,10 @@ class Driver(abc.ABC):
         """The force for the step at ``t`` (s) from the full measured state ``x``."""
 
     def control(self, t: float, x: ArrayLike, plan: OnChange[Array] | None,
-                disturbance: ArrayLike | None) -> ControlOutput | None:
-        """One step: adopt a plan that changed, then :meth:`step`.
+                disturbance: ArrayLike | None,
+                reference: OnChange[tuple[Array, int]] | None = None,
+                obstacles: OnChange[list[Array]] | None = None) -> ControlOutput | None:
+        """One step: adopt a plan that changed (and the guidance), then :meth:`step`.
 
         None for non-finite odometry: the node commands zero, and nothing is learned.
         A non-finite disturbance measurement is not used.
@@ -111,6 +128,7 @@ class Driver(abc.ABC):
         if plan is not None and plan.stamp_ns != self._plan_stamp:
             self._plan_stamp = plan.stamp_ns
             self.set_plan(plan.read(), state, t)
+        self.set_guidance(reference, obstacles)
         d = None
         if disturbance is not None and np.all(np.isfinite(disturbance)):
             d = np.asarray(disturbance, dtype=float)
@@ -232,15 +250,23 @@ class OpenLoopDriver(Driver):
             event=LegEvent.CONTINUE.value)
 
 
-DRIVERS: dict[Variant, type[Driver]] = {
+def _vf_lpc_driver(config: ControllerConfig, n: int, m: int, q: int,
+                   rng: np.random.Generator, **extra: Any) -> Driver:
+    # Imported when needed: the vf_lpc driver is a Driver, so it imports this module.
+    from .vf_lpc.driver import VFLPCDriver
+    return VFLPCDriver(config, n, m, q, rng, **extra)
+
+
+DRIVERS: dict[Variant, Callable[..., Driver]] = {
     Variant.NOMINAL: LearningDriver,
     Variant.ROBUST: LearningDriver,
     Variant.OPEN_LOOP: OpenLoopDriver,
+    Variant.VF_LPC: _vf_lpc_driver,
 }
 """The driver of each controller variant: a new variant registers its own here."""
 
 
 def make_driver(config: ControllerConfig, n: int, m: int, q: int,
-                rng: np.random.Generator) -> Driver:
-    """The driver of ``config.variant``."""
-    return DRIVERS[config.variant](config, n, m, q, rng)
+                rng: np.random.Generator, **extra: Any) -> Driver:
+    """The driver of ``config.variant`` (``extra``: its own settings, e.g. vf_lpc's ``lpc``)."""
+    return DRIVERS[config.variant](config, n, m, q, rng, **extra)

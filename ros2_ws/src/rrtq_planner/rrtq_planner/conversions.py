@@ -6,14 +6,15 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
-from geometry_msgs.msg import Point
-from rrtq_msgs.msg import ControllerState, PlannerStats, SafetyStatus
+from geometry_msgs.msg import Point, Vector3
+from rrtq_msgs.msg import ControllerState, GuidanceReference, PlannerStats, SafetyStatus
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from rrtq_common.conversions import MAP_FRAME, time_msg
 
 from .margins.policy import LegInfo, MarginSample, MarginStatus
+from .guidance import GuidanceOutput
 from .rrtx_config import PlanStatus
 from .safety import Leg, SafetyStep
 from .session import Cycle
@@ -107,3 +108,16 @@ def margin_sample(t: float, x: np.ndarray, state: ControllerState | None, n: int
                     n, m) if gain else None)
     return MarginSample(t, x, leg, np.asarray(state.command, dtype=float),
                         np.asarray(state.probing_noise, dtype=float), k, float(state.horizon))
+
+
+def reference_msg(stamp_ns: int, out: GuidanceOutput, dt: float) -> GuidanceReference:
+    """/guidance/reference of one cycle: samples every ``dt`` (s) from the step's stamp."""
+    ref = out.reference
+    msg = GuidanceReference(
+        status=str(out.status), dt=float(dt), rollout=out.rollout,
+        positions=[Point(x=float(x), y=float(y)) for x, y in ref.positions],
+        velocities=[Vector3(x=float(x), y=float(y)) for x, y in ref.velocities],
+        obstacles_stamp=time_msg(out.obstacles_stamp_ns), plan_stamp=time_msg(out.plan_stamp_ns))
+    msg.header.stamp = time_msg(stamp_ns)
+    msg.header.frame_id = MAP_FRAME
+    return msg

@@ -1,5 +1,10 @@
 """Planner node: RRT^X on /goal_pose, /odom and /obstacles/augmented; /plan out.
 
+With ``planner.guidance.mode: gvf`` it also runs the guiding level (VF-LPC §IV-A,
+:class:`rrtq_planner.guidance.GuidanceSession`): the plan is the desired path, the
+augmented obstacles the fields' obstacles, and every cycle's reference trajectory goes
+out on /guidance/reference, stamped with the step, before the statistics.
+
 Anytime (:class:`rrtq_planner.session.PlannerSession`): the graph keeps growing between
 changes, within a budget per cycle — a fixed number of iterations per step in lock-step
 mode, a slice of wall time per timer cycle in paced mode. The plan is republished
@@ -16,7 +21,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped
 from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
-from rrtq_msgs.msg import ObstacleArray, PlannerStats, SafetyStatus
+from rrtq_msgs.msg import GuidanceReference, ObstacleArray, PlannerStats, SafetyStatus
 from visualization_msgs.msg import MarkerArray
 
 from rrtq_common import conversions as conv
@@ -25,7 +30,8 @@ from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import RunConfig
-from rrtq_planner.conversions import stats_msg, tree_msg
+from rrtq_planner.conversions import reference_msg, stats_msg, tree_msg
+from rrtq_planner.guidance import GuidanceConfig, GuidanceMode, GuidanceSession
 from rrtq_planner.session import Budget, PlannerConfig, PlannerSession
 
 
@@ -37,6 +43,13 @@ class PlannerNode(Node):
         self.run = declare_config(self, RunConfig)
         self.config = declare_config(self, PlannerConfig)
         self.session: PlannerSession | None = None
+        # planner.guidance: the reference of the guiding vector field, every cycle (gvf).
+        guidance = declare_config(self, GuidanceConfig, dt=self.run.dt)
+        self.guidance = None
+        if guidance.mode is GuidanceMode.GVF:
+            self.guidance = GuidanceSession(guidance)
+            self.reference_pub = self.create_publisher(
+                GuidanceReference, topics.GUIDANCE_REFERENCE, qos.STREAM)
         self.plan_pub = self.create_publisher(Path, topics.PLAN, qos.LATCHED)
         self.stats_pub = self.create_publisher(PlannerStats, topics.PLANNER_STATS, qos.STREAM)
         self.tree_pub = self.create_publisher(MarkerArray, topics.PLANNER_TREE, qos.LATCHED)
@@ -44,7 +57,7 @@ class PlannerNode(Node):
             [Requirement('safety', followup='augmented',
                          names=lambda m: conv.stamp_ns(m.augmented_stamp))],
             lockstep=self.run.lockstep, dt_ns=seconds_to_ns(self.run.dt),
-            resend=self.stats_pub.publish, on_step=self._on_step, held=True)
+            resend=self._publish, on_step=self._on_step, held=True)
         self.create_subscription(PoseStamped, topics.GOAL_POSE, self.on_goal, qos.LATCHED)
         subscribe_inputs(self, self.gate, (
             Input('odom', Odometry, topics.ODOM, qos.STREAM),
@@ -82,10 +95,24 @@ class PlannerNode(Node):
         if done.changed:
             self.plan_pub.publish(conv.path_msg(step.stamp_ns, done.plan.waypoints))
         stats = stats_msg(done)
-        self.gate.answered(step.stamp_ns, stats)
-        self.stats_pub.publish(stats)
+        reference = None
+        if self.guidance is not None:
+            odom = step['odom']
+            out = self.guidance.cycle(step.stamp_ns * 1e-9, conv.odometry_state(odom),
+                                      done.plan.waypoints, done.plan_stamp_ns,
+                                      conv.changed_obstacles(step.get('augmented')))
+            reference = reference_msg(step.stamp_ns, out, self.guidance.config.dt)
+        self.gate.answered(step.stamp_ns, stats, reference)
+        self._publish(stats, reference)
         if done.tree is not None:
             self.tree_pub.publish(tree_msg(step.stamp_ns, done.tree))
+
+
+    def _publish(self, stats: PlannerStats, reference: GuidanceReference | None = None) -> None:
+        # The reference first: the controller's step waits for it, and is released by it.
+        if reference is not None:
+            self.reference_pub.publish(reference)
+        self.stats_pub.publish(stats)
 
 
 def main(args: list[str] | None = None) -> None:

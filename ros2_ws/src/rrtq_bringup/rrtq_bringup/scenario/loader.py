@@ -16,6 +16,7 @@ import numpy as np
 from rrtq_bringup.scenario.schema import Scenario
 from rrtq_bringup.scenario.sections import (read_controller, read_disturbance, read_planner,
                                             read_plant, read_safety)
+from rrtq_bringup.scenario.vf_lpc import read_guidance, read_vf_lpc
 from rrtq_common.world import World
 from rrtq_common.world_yaml import read_world
 from rrtq_common.yaml_reader import Reader, ScenarioError, read_yaml
@@ -81,6 +82,11 @@ def parse_scenario(data: Any, path: str) -> Scenario:
     controller = read_controller(r, ctrl_raw, plant, world)
     planner, safety, goal_tolerance = read_planner(r, data.get('planner'), world)
     margins = read_safety(r, data.get('safety'), os.path.dirname(os.path.abspath(path)), plant)
+    planner_raw = data.get('planner')
+    guidance = read_guidance(r, planner_raw.get('guidance') if isinstance(planner_raw, Mapping)
+                             else None, controller.dt)
+    controller, lpc = read_vf_lpc(r, ctrl_raw, controller, plant, guidance,
+                                  os.path.dirname(os.path.abspath(path)))
     if disturbance.model is DisturbanceModel.WORST_CASE:
         assert disturbance.gamma is not None
         _check_game(r, 'disturbance.gamma', plant, controller, disturbance.F, disturbance.gamma)
@@ -91,7 +97,8 @@ def parse_scenario(data: Any, path: str) -> Scenario:
     return Scenario(path=path, name=name, seed=seed,
                     duration=r.setting(data, 'duration', Scenario), plant=plant,
                     disturbance=disturbance, controller=controller, planner=planner,
-                    safety=safety, margins=margins, goal_tolerance=goal_tolerance, **world_fields)
+                    safety=safety, margins=margins, goal_tolerance=goal_tolerance, guidance=guidance,
+                    lpc=lpc, **world_fields)
 
 
 def load_scenario(path: str | os.PathLike[str], seed: int | None = None) -> Scenario:

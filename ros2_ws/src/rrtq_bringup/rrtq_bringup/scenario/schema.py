@@ -12,13 +12,15 @@ node's ``growth_threshold``, the referee's ``goal_tolerance``); ``safety:``
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from rrtq_bringup.mission import MissionConfig
 from rrtq_common.settings import like, setting
 from rrtq_common.world import World
 from rrtq_controller.config import ControllerConfig
 from rrtq_planner.margins.build import MarginConfig
+from rrtq_controller.vf_lpc import LPCConfig
+from rrtq_planner.guidance import GuidanceConfig
 from rrtq_planner.safety import SafetyConfig
 from rrtq_planner.session import PlannerConfig
 from rrtq_sim.disturbance import DisturbanceConfig
@@ -48,6 +50,11 @@ class Scenario(World):
         The ``safety:`` section: the safety node's margin policy.
     goal_tolerance : float
         m; the referee's distance to the goal that counts as reached.
+    guidance : GuidanceConfig
+        ``planner.guidance``: what the planner hands the controller (waypoints, or the
+        guiding vector field's reference).
+    lpc : LPCConfig
+        ``controller.vf_lpc``: the vf_lpc controller's solver and compensation.
     """
 
     path: str
@@ -62,3 +69,5 @@ class Scenario(World):
     safety: SafetyConfig
     margins: MarginConfig = MarginConfig()
     goal_tolerance: float = like(MissionConfig, 'goal_tolerance')
+    guidance: GuidanceConfig = field(default_factory=GuidanceConfig)
+    lpc: LPCConfig = field(default_factory=LPCConfig)

@@ -36,7 +36,7 @@ _SAFETY_KEYS = ('margin', 'confidence', 'window', 'initial_margin', 'calibration
 _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
-    'force_limit',
+    'force_limit', 'model', 'vf_lpc',
 )  # fmt: skip
 # planner key -> the settings dataclass it belongs to
 _PLANNER_KEYS: dict[str, type] = {
@@ -229,7 +229,7 @@ def read_planner(r: Reader, raw: Any,
     Those are the safety node's growth threshold and the referee's goal tolerance.
     """
     key = 'planner'
-    data = r.mapping({} if raw is None else raw, key, tuple(_PLANNER_KEYS))
+    data = r.mapping({} if raw is None else raw, key, (*_PLANNER_KEYS, 'guidance'))
     values = {name: r.setting(data, name, cls, key) for name, cls in _PLANNER_KEYS.items()}
     (x0, x1), (y0, y1) = world.bounds
     planner = PlannerConfig(bounds=(x0, x1, y0, y1), **{

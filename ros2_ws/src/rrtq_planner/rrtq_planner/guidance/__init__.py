@@ -11,9 +11,11 @@ from .field import CompositeField, RolloutState, VirtualObstacle, bump_weights, 
     place_virtual_obstacles
 from .obstacles import PolygonDistances
 from .path import FilletedPath, PathQuery
+from .session import GuidanceOutput, GuidanceSession, ReferenceStatus
 from .track import GuidanceTrack
 
 __all__ = ['CompositeField', 'Curve', 'CurveStatus', 'FilletedPath', 'GuidanceConfig',
-           'GuidanceMode', 'GuidanceTrack', 'PathQuery', 'PolygonDistances', 'Reference',
-           'RolloutState', 'VirtualObstacle', 'bump_weights', 'integral_curve',
-           'menger_curvature', 'place_virtual_obstacles', 'sample_in_time', 'speed_profile']
+           'GuidanceMode', 'GuidanceOutput', 'GuidanceSession', 'GuidanceTrack', 'PathQuery',
+           'PolygonDistances', 'Reference', 'ReferenceStatus', 'RolloutState',
+           'VirtualObstacle', 'bump_weights', 'integral_curve', 'menger_curvature',
+           'place_virtual_obstacles', 'sample_in_time', 'speed_profile']
