@@ -5,6 +5,7 @@
   the traversed path, the perception disc along it, the leg targets;
 - ``timeseries.png``: forces, speed and distance to goal, disturbance, D_rob and its
   maximum, the learned weights (each panel only when its topics were recorded);
+- with ``--video``, ``run.mp4`` or ``run.gif`` (:mod:`rrtq_bringup.video`);
 - ``summary.json``: path length, control effort, clearance against the true obstacles,
   time to goal, legs — from the recorded messages and the scenario embedded in the file.
 """
@@ -205,8 +206,13 @@ def plot_legs(table: LegTable, path: pathlib.Path) -> None:
     plt.close(fig)
 
 
-def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = None) -> dict:
-    """Write the figures and summary for ``recording``; return the summary."""
+def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = None,
+           video_interval: float | None = None, video_fps: float = 10.0) -> dict:
+    """Write the figures and summary for ``recording``; return the summary.
+
+    ``video_interval`` (s of sim time per frame): also the animation of the run
+    (:func:`rrtq_bringup.video.write_video`), named in the summary as ``video``.
+    """
     recording = pathlib.Path(recording)
     out = pathlib.Path(out_dir) if out_dir else recording.parent / 'report'
     out.mkdir(parents=True, exist_ok=True)
@@ -223,5 +229,9 @@ def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = N
                 'legs', 'median_ratio_last10', 'median_ratio_last10_complete',
                 'median_gain_error_last10', 'ratios_last10')}
             plot_legs(table, out / 'legs.png')
+    if video_interval is not None:
+        from rrtq_bringup.video import write_video
+        summary['video'] = str(write_video(data, scenario, recording, out,
+                                           interval=video_interval, fps=video_fps))
     (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
     return summary
