@@ -1,14 +1,18 @@
 """`rrtq run --live PORT`: a Foxglove WebSocket client on 127.0.0.1 watches the run.
 
-The client speaks the protocol itself (the ``websockets`` package, subprotocol
-``foxglove.websocket.v1``): server info, the advertised channels, a subscription, and the
-binary message frames, whose CDR payloads are decoded with mcap_ros2's decoder from the
-schema text the server advertised. The listening sockets are read from /proc/net.
+The client speaks the protocol itself (the ``websockets`` package): server info, the
+advertised channels, a subscription, and the binary message frames, whose CDR payloads are
+decoded with mcap_ros2's decoder from the schema text the server advertised. It offers the
+two subprotocol names the Foxglove app offers: the official SDK's server answers to
+``foxglove.sdk.v1`` only (a client that offers nothing but the older name
+``foxglove.websocket.v1`` is refused, which the test checks too, since docs/design.md says
+so). The listening sockets are read from /proc/net.
 """
 
 import asyncio
 import json
 import pathlib
+import signal
 import socket
 import struct
 import subprocess
@@ -17,17 +21,19 @@ import time
 from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
 from websockets.asyncio.client import connect
+from websockets.exceptions import InvalidStatus
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
-# A plant test (no planner) long enough in lock-step to be watched for a few seconds.
+# A plant test (no planner), long enough in lock-step to be watched; the test ends it with
+# SIGINT (as Ctrl-C would) once it has seen what it wants.
 SCENARIO = """
 name: live
 seed: 2
 bounds: {x: [-40, 40], y: [-40, 40]}
 start: [0.0, 0.0]
 goal: [30.0, 30.0]
-duration: 60.0
+duration: 300.0
 perception_radius: 6.0
 robot_radius: 0.3
 plant: {model: rover, stiffness: 0.0, force_limit: 100.0}
@@ -37,7 +43,7 @@ controller:
 obstacles:
   - {id: post, polygon: [[3, -1], [4, -1], [4, 0], [3, 0]], known: true}
 """
-SUBPROTOCOL = 'foxglove.websocket.v1'
+OFFERED = ['foxglove.sdk.v1', 'foxglove.websocket.v1']     # as the Foxglove app offers them
 WANTED = ('/odom', '/viz/obstacles/truth', '/tf')
 
 
@@ -62,18 +68,25 @@ def listening(port: int) -> list[str]:
     return found
 
 
-async def watch(port: int, deadline: float) -> tuple[dict, dict, dict]:
-    """Connect, read server info and adverts, subscribe to WANTED, decode one message each."""
+async def watch(port: int, deadline: float) -> tuple[dict, dict, dict, bool]:
+    """Connect, read server info and adverts, subscribe to WANTED, decode one message each.
+
+    Also: whether a client offering only ``foxglove.websocket.v1`` is refused.
+    """
     while True:
         try:
-            ws = await connect(f'ws://127.0.0.1:{port}', subprotocols=[SUBPROTOCOL],
-                               max_size=None)
+            ws = await connect(f'ws://127.0.0.1:{port}', subprotocols=OFFERED, max_size=None)
             break
         except OSError:
             assert time.monotonic() < deadline, 'the live server never accepted a connection'
             await asyncio.sleep(0.2)
+    try:
+        async with connect(f'ws://127.0.0.1:{port}', subprotocols=['foxglove.websocket.v1']):
+            old_name_refused = False
+    except InvalidStatus as refusal:
+        old_name_refused = refusal.response.status_code == 400
     async with ws:
-        assert ws.subprotocol == SUBPROTOCOL
+        assert ws.subprotocol == 'foxglove.sdk.v1'
         info, channels, decoded, subscribed = None, {}, {}, {}
         factory = DecoderFactory()
         while time.monotonic() < deadline and len(decoded) < len(WANTED):
@@ -96,10 +109,13 @@ async def watch(port: int, deadline: float) -> tuple[dict, dict, dict]:
             sub_id, _log_time = struct.unpack_from('<IQ', frame, 1)
             topic = subscribed[sub_id]
             channel = channels[topic]
-            schema = Schema(id=1, name=channel['schemaName'], encoding=channel['schemaEncoding'],
-                            data=channel['schema'].encode())
-            decoded.setdefault(topic, factory.decoder_for(channel['encoding'], schema)(frame[13:]))
-    return info, channels, decoded
+            if topic in decoded:
+                continue
+            # The decoder factory caches by schema id: one id per channel.
+            schema = Schema(id=channel['id'], name=channel['schemaName'],
+                            encoding=channel['schemaEncoding'], data=channel['schema'].encode())
+            decoded[topic] = factory.decoder_for(channel['encoding'], schema)(frame[13:])
+    return info, channels, decoded, old_name_refused
 
 
 def test_live_view_serves_the_running_graph_on_loopback_only(tmp_path):
@@ -110,15 +126,18 @@ def test_live_view_serves_the_running_graph_on_loopback_only(tmp_path):
                              str(tmp_path / 'run'), '--mode', 'composed', '--live', str(port)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        info, channels, decoded = asyncio.run(watch(port, time.monotonic() + 60.0))
+        info, channels, decoded, old_name_refused = asyncio.run(
+            watch(port, time.monotonic() + 60.0))
         addresses = listening(port)
     finally:
+        proc.send_signal(signal.SIGINT)
         try:
-            stdout, stderr = proc.communicate(timeout=120)
+            stdout, stderr = proc.communicate(timeout=60)
         except subprocess.TimeoutExpired:
             proc.kill()
             stdout, stderr = proc.communicate()
-    assert proc.returncode == 0, stderr
+    summary = json.loads(stdout)
+    assert summary['outcome'] == 'interrupted', stderr
     assert addresses == ['127.0.0.1']
     assert info is not None and info['name'] == 'rrtq'
     assert {'/odom', '/cmd_force', '/viz/obstacles/truth', '/tf'} <= set(channels)
@@ -129,4 +148,7 @@ def test_live_view_serves_the_running_graph_on_loopback_only(tmp_path):
     assert decoded['/odom'].child_frame_id == 'base_link'
     assert [m.text for m in decoded['/viz/obstacles/truth'].markers] == ['post']
     assert decoded['/tf'].transforms[0].child_frame_id == 'base_link'
-    assert json.loads(stdout)['success'] is True
+    assert old_name_refused
+    # The run went on while it was watched, and its recording has what the viewer saw.
+    assert summary['sim_time_s'] > 0.0
+    assert (tmp_path / 'run' / 'run.mcap').exists()

@@ -9,6 +9,7 @@ import json
 import pathlib
 import subprocess
 
+import numpy as np
 import pytest
 import shapely
 from mcap.reader import make_reader
@@ -215,5 +216,29 @@ def test_report_video_has_one_frame_per_interval(recording, tmp_path, decoded):
     assert 'video' in proc.stderr and f'{frames}/{frames} frames' in proc.stderr
     video = out / 'run.gif'
     assert video.exists()
+    odom = [(stamp(m.header), m.pose.pose.position) for _, m in decoded['/odom']]
     with Image.open(video) as gif:
         assert gif.n_frames == frames
+        for frame in range(frames):
+            gif.seek(frame)
+            t = frame * 0.5
+            expected = [p for s, p in odom if s <= t + 1e-9][-1]
+            x, y = robot_in_frame(np.asarray(gif.convert('RGB'), dtype=float), (-10, 10),
+                                  (-10, 10))
+            # 20 m over ~500 pixels: a pixel is 4 cm.
+            assert abs(x - expected.x) < 0.1 and abs(y - expected.y) < 0.1, (frame, x, y)
+
+
+def robot_in_frame(rgb, xlim, ylim):
+    """Where a frame draws the robot, in metres: the centroid of its pure blue disc, mapped
+    through the axes box (the black spines) to the axes' data limits."""
+    dark = rgb.sum(axis=2) < 120
+    columns = np.flatnonzero(dark.sum(axis=0) > 0.5 * rgb.shape[0])
+    rows = np.flatnonzero(dark.sum(axis=1) > 0.5 * rgb.shape[1])
+    left, right, top, bottom = columns.min(), columns.max(), rows.min(), rows.max()
+    blue = (rgb[..., 2] > 200) & (rgb[..., 0] < 60) & (rgb[..., 1] < 60)
+    assert blue.sum() > 20, 'no robot disc in the frame'
+    r, c = np.nonzero(blue)
+    x = xlim[0] + (c.mean() - left) / (right - left) * (xlim[1] - xlim[0])
+    y = ylim[1] - (r.mean() - top) / (bottom - top) * (ylim[1] - ylim[0])
+    return x, y

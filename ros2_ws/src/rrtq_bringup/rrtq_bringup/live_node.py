@@ -32,7 +32,7 @@ class LiveNode(Node):
                                             context=self.context_fg)
         self.get_logger().info(f'live view on ws://{LIVE_HOST}:{self.server.port}')
         self._channels: dict[str, foxglove.Channel] = {}
-        self._subscriptions: list[object] = []
+        self._readers: list[object] = []
         self.create_timer(config.discovery_period_s, self.discover)
         self.discover()
 
@@ -49,7 +49,7 @@ class LiveNode(Node):
             channel = foxglove.Channel(topic, schema=schema, message_encoding='cdr',
                                        context=self.context_fg)
             self._channels[topic] = channel
-            self._subscriptions.append(self.create_subscription(
+            self._readers.append(self.create_subscription(
                 message_class(type_name), topic, self._forward(channel),
                 request_for([offer_of(i.qos_profile) for i in infos]), raw=True))
 

@@ -32,6 +32,7 @@ from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 from rrtq_bringup.run_data import RunData, _tree_segments  # noqa: E402
 
 Sets = list[tuple[float, list[tuple[str, np.ndarray]]]]
+ROBOT_COLOR = '#0000ff'    # the robot's disc: a colour nothing else in the frame has
 
 
 def frame_times(t_end: float, interval: float) -> np.ndarray:
@@ -146,7 +147,7 @@ def write_video(data: RunData, scenario: dict, recording: str | pathlib.Path,
     target, = ax.plot([], [], 'x', color='k', ms=7, zorder=6, label='leg target')
     disc = ax.add_patch(Circle((0, 0), perception, fill=False, ec='tab:blue', ls=':',
                                alpha=0.5, zorder=5))
-    robot = ax.add_patch(Circle((0, 0), max(robot_radius, 0.2), color='tab:blue', zorder=7))
+    robot = ax.add_patch(Circle((0, 0), max(robot_radius, 0.2), color=ROBOT_COLOR, zorder=7))
     if data.goal is not None:
         ax.plot(*data.goal, '*', color='gold', mec='k', ms=14, zorder=6, label='goal')
     ax.legend(loc='upper left', fontsize=7)
