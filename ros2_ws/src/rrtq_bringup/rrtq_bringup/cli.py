@@ -11,6 +11,7 @@ import pathlib
 import sys
 
 EXIT_BAD_INPUT = 2
+LIVE_PORT = 8765      # Foxglove's default WebSocket port
 
 
 def _speed(text: str) -> float:
@@ -24,6 +25,36 @@ def _speed(text: str) -> float:
     if not value > 0.0:
         raise argparse.ArgumentTypeError(f'speed factor must be > 0, got {text}')
     return value
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if not value > 0.0:
+        raise argparse.ArgumentTypeError(f'must be > 0, got {text}')
+    return value
+
+
+def _port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a TCP port number, got {text!r}') from None
+    if not 1 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f'port must be in 1..65535, got {value}')
+    return value
+
+
+def _port_free(port: int) -> bool:
+    import socket
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as probe:
+        try:
+            probe.bind(('127.0.0.1', port))
+        except OSError:
+            return False
+    return True
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -41,6 +72,10 @@ def _parser() -> argparse.ArgumentParser:
                      help='one process per node (default) or all nodes on one executor')
     run.add_argument('--overwrite', action='store_true',
                      help='replace an existing recording in the output directory')
+    run.add_argument('--live', type=_port, nargs='?', const=LIVE_PORT, metavar='PORT',
+                     help='also serve the running graph to Foxglove over its WebSocket '
+                     f'protocol on ws://127.0.0.1:PORT (default port {LIVE_PORT}); in '
+                     'lock-step the view follows the run as fast as it goes')
     sub.add_parser('plan', help='the RRT^X planner alone on a scenario or Otte file; '
                    "'rrtq plan --help' for its options", add_help=False)
     sub.add_parser('bench', help='Monte Carlo over seeds and random obstacle layouts; '
@@ -51,6 +86,12 @@ def _parser() -> argparse.ArgumentParser:
     rep.add_argument('recording', type=pathlib.Path, help='run.mcap of a run')
     rep.add_argument('--out', type=pathlib.Path,
                      help='output directory (default: report/ beside the recording)')
+    rep.add_argument('--video', action='store_true',
+                     help='also write run.mp4 (ffmpeg) or run.gif (Pillow) of the run')
+    rep.add_argument('--frame-interval', type=_positive, default=0.5, metavar='S',
+                     help='simulated seconds per video frame (default 0.5)')
+    rep.add_argument('--fps', type=_positive, default=10.0,
+                     help='video frames per second of playback (default 10)')
     return parser
 
 
@@ -65,14 +106,20 @@ def cmd_run(args: argparse.Namespace) -> int:
         if (out / 'run.mcap').exists() and not args.overwrite:
             raise BadInput(f'{out / "run.mcap"} exists; choose another --out or pass '
                            '--overwrite')
+        if args.live is not None and not _port_free(args.live):
+            raise BadInput(f'--live: port {args.live} on 127.0.0.1 is in use')
     except (ScenarioError, BadInput) as exc:
         print(f'rrtq: error: {exc}', file=sys.stderr)
         return EXIT_BAD_INPUT
     for stale in ('run.mcap', 'summary.json'):
         (out / stale).unlink(missing_ok=True)
-    options = RunOptions(out_dir=out, speed=args.speed, mode=RunMode(args.mode))
+    options = RunOptions(out_dir=out, speed=args.speed, mode=RunMode(args.mode),
+                         live_port=args.live)
     print(f'rrtq: running {scenario.name} (seed {scenario.seed}, {args.mode}, speed '
           f"{'max' if args.speed == 0 else args.speed}) -> {out}", file=sys.stderr)
+    if args.live is not None:
+        print(f'rrtq: live view on ws://127.0.0.1:{args.live} (Foxglove: Open connection, '
+              'Foxglove WebSocket)', file=sys.stderr)
     code = Run(scenario, options).execute()
     summary = json.loads((out / 'summary.json').read_text())
     print(json.dumps({k: summary[k] for k in ('success', 'outcome', 'reason', 'sim_time_s',
@@ -92,7 +139,9 @@ def cmd_report(args: argparse.Namespace) -> int:
     from mcap.exceptions import McapError
     from rrtq_bringup.report import report
     try:
-        summary = report(args.recording, args.out)
+        summary = report(args.recording, args.out,
+                         video_interval=args.frame_interval if args.video else None,
+                         video_fps=args.fps)
     except (McapError, ValueError) as exc:
         print(f'rrtq: error: {args.recording}: not a readable recording ({exc})',
               file=sys.stderr)
@@ -101,6 +150,8 @@ def cmd_report(args: argparse.Namespace) -> int:
     print(json.dumps({k: summary[k] for k in ('sim_time_s', 'path_length_m', 'min_clearance_m',
                                                'collided', 'time_to_goal_s')}))
     print(f'rrtq: figures in {out}', file=sys.stderr)
+    if 'video' in summary:
+        print(f"rrtq: video {summary['video']}", file=sys.stderr)
     return 0
 
 

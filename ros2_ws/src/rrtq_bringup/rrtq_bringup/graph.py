@@ -24,6 +24,7 @@ from typing import Any
 
 from rrtq_bringup.recording import RecorderConfig
 from rrtq_bringup.scenario import Scenario, worst_case_game
+from rrtq_bringup.viz import LiveConfig, VizConfig
 from rrtq_common import topics
 from rrtq_common.run import Dimensions, RunConfig
 from rrtq_common.settings import to_parameters
@@ -56,8 +57,12 @@ def closed_loop(scenario: Scenario) -> bool:
     return scenario.controller.variant is not Variant.OPEN_LOOP
 
 
-def build_graph(scenario: Scenario, speed: float, output: str) -> list[NodeSpec]:
-    """The nodes for ``scenario`` (``speed`` 0 = lock-step), recording to ``output``."""
+def build_graph(scenario: Scenario, speed: float, output: str,
+                live_port: int | None = None) -> list[NodeSpec]:
+    """The nodes for ``scenario`` (``speed`` 0 = lock-step), recording to ``output``.
+
+    ``live_port``: also serve the graph on ws://127.0.0.1:PORT (``rrtq run --live``).
+    """
     plant, dist, ctrl = scenario.plant, scenario.disturbance, scenario.controller
     loop = closed_loop(scenario)
     robust = ctrl.variant is Variant.ROBUST
@@ -95,7 +100,16 @@ def build_graph(scenario: Scenario, speed: float, output: str) -> list[NodeSpec]
     supervisor = NodeSpec('supervisor', 'rrtq_bringup.supervisor', 'SupervisorNode', {},
                           subscribes=(topics.ODOM, topics.CMD_FORCE, topics.CONTROLLER_STATE)
                           + ((topics.PLANNER_STATS,) if loop else ()))
-    others = [recorder, supervisor, controller, disturbance, spawner]
+    # For people only (/tf and markers): outside the lock-step chain, nothing reads it.
+    viz = NodeSpec('viz', 'rrtq_bringup.viz_node', 'VizNode',
+                   to_parameters(VizConfig(robot_radius=scenario.robot_radius,
+                                           perception_radius=scenario.perception_radius)),
+                   subscribes=(topics.ODOM, topics.CONTROLLER_STATE))
+    others = [recorder, supervisor, controller, disturbance, spawner, viz]
+    if live_port is not None:
+        # A reader of every topic, gating nothing: the run never waits for the viewer.
+        others.append(NodeSpec('live', 'rrtq_bringup.live_node', 'LiveNode',
+                               to_parameters(LiveConfig(port=live_port))))
     if loop:
         others.append(NodeSpec(
             'planner', 'rrtq_planner.planner_node', 'PlannerNode',

@@ -56,6 +56,7 @@ class RunOptions:
     mode: RunMode = RunMode.PROCESSES
     start_timeout_s: float = 60.0      # wall time allowed before the first step
     stall_timeout_s: float = 20.0      # wall time without a new step before giving up
+    live_port: int | None = None       # serve the graph on ws://127.0.0.1:PORT (--live)
 
 
 class BadInput(Exception):
@@ -110,7 +111,8 @@ class Run:
         self.scenario = scenario
         self.options = options
         self.out = options.out_dir
-        self.graph = build_graph(scenario, options.speed, str(self.out / 'run.mcap'))
+        self.graph = build_graph(scenario, options.speed, str(self.out / 'run.mcap'),
+                                 live_port=options.live_port)
         ctrl = scenario.controller
         self.monitor = MissionMonitor(MissionConfig(
             goal=(float(scenario.goal[0]), float(scenario.goal[1])),

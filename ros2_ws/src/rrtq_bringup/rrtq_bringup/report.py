@@ -7,6 +7,7 @@
   maximum, the learned weights (each panel only when its topics were recorded);
 - ``vf_lpc.png`` and the summary's ``vf_lpc`` entry for a vf_lpc run
   (:mod:`rrtq_bringup.report_vf_lpc`);
+- with ``--video``, ``run.mp4`` or ``run.gif`` (:mod:`rrtq_bringup.video`);
 - ``summary.json``: path length, control effort, clearance against the true obstacles,
   time to goal, legs — from the recorded messages and the scenario embedded in the file.
 """
@@ -236,8 +237,13 @@ def plot_legs(table: LegTable, path: pathlib.Path) -> None:
     plt.close(fig)
 
 
-def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = None) -> dict:
-    """Write the figures and summary for ``recording``; return the summary."""
+def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = None,
+           video_interval: float | None = None, video_fps: float = 10.0) -> dict:
+    """Write the figures and summary for ``recording``; return the summary.
+
+    ``video_interval`` (s of sim time per frame): also the animation of the run
+    (:func:`rrtq_bringup.video.write_video`), named in the summary as ``video``.
+    """
     recording = pathlib.Path(recording)
     out = pathlib.Path(out_dir) if out_dir else recording.parent / 'report'
     out.mkdir(parents=True, exist_ok=True)
@@ -257,5 +263,9 @@ def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = N
     if is_vf_lpc(data):
         summary['vf_lpc'] = vf_lpc_summary(data, scenario)
         plot_vf_lpc(data, out / 'vf_lpc.png')
+    if video_interval is not None:
+        from rrtq_bringup.video import write_video
+        summary['video'] = str(write_video(data, scenario, recording, out,
+                                           interval=video_interval, fps=video_fps))
     (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')
     return summary
