@@ -186,9 +186,9 @@ class Run:
     # -- processes mode -------------------------------------------------------------------
     def _run_processes(self, domain: int) -> None:
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.signals import SignalHandlerOptions
         from rrtq_bringup.supervisor import SupervisorNode
+        from rrtq_common.executors import make_executor
 
         env = ros_env(domain)
         params_dir = self.out / 'params'
@@ -198,7 +198,7 @@ class Run:
                    signal_handler_options=SignalHandlerOptions.NO)
         os.environ.update({k: env[k] for k in ('ROS_AUTOMATIC_DISCOVERY_RANGE',)})
         supervisor = SupervisorNode(self.monitor, self.scenario.goal, context=context)
-        executor = SingleThreadedExecutor(context=context)
+        executor = make_executor(context)
         executor.add_node(supervisor)
         try:
             for spec in self.graph:
@@ -262,16 +262,16 @@ class Run:
     # -- composed mode --------------------------------------------------------------------
     def _run_composed(self, domain: int) -> None:
         import rclpy
-        from rclpy.executors import SingleThreadedExecutor
         from rclpy.parameter import Parameter
         from rclpy.signals import SignalHandlerOptions
         from rrtq_bringup.supervisor import SupervisorNode
+        from rrtq_common.executors import make_executor
 
         os.environ.update(ros_env(domain))
         context = rclpy.Context()
         rclpy.init(context=context, domain_id=domain,
                    signal_handler_options=SignalHandlerOptions.NO)
-        executor = SingleThreadedExecutor(context=context)
+        executor = make_executor(context)
         nodes = [SupervisorNode(self.monitor, self.scenario.goal, context=context)]
         try:
             for spec in self.graph:
@@ -284,14 +284,18 @@ class Run:
                 executor.add_node(node)
             self._spin(executor, lambda: None, nodes[0])
         finally:
-            # Recorder last, after draining what is still queued for it.
-            for node in sorted(nodes, key=lambda n: n.get_name() == 'recorder'):
-                if node.get_name() == 'recorder':
-                    deadline = time.monotonic() + 0.3
-                    while time.monotonic() < deadline:
-                        executor.spin_once(timeout_sec=0.02)
+            # Drain what is still queued for the recorder, then destroy the nodes (the
+            # recorder last) once nothing spins: a node removed from the EventsExecutor
+            # may still have a timer fire (rrtq_common.executors).
+            deadline = time.monotonic() + 0.3
+            with contextlib.suppress(Exception):  # a failed node's error is already taken
+                while time.monotonic() < deadline:
+                    executor.spin_once(timeout_sec=0.02)
+            for node in nodes:
                 if node in executor.get_nodes():
                     executor.remove_node(node)
+            executor.shutdown()
+            for node in sorted(nodes, key=lambda n: n.get_name() == 'recorder'):
                 node.destroy_node()
             context.try_shutdown()
 

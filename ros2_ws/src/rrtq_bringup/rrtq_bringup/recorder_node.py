@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import inspect
 import pathlib
 import time
 
@@ -13,6 +14,7 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, LivelinessPolicy, QoSPro
 
 from rrtq_bringup.recording import (INFINITE_DURATION, SCENARIO_METADATA, McapRecorder,
                                     QosOffer, RecorderConfig)
+from rrtq_common.executors import NODE_OPTIONS
 from rrtq_common.params import declare_config, spin_node
 
 
@@ -56,13 +58,16 @@ def request_for(offers: list[QosOffer]) -> QoSProfile:
 
 
 DRAIN_LIMIT = 1000
+# The signature rclpy reads to hand a subscription callback the message info as well.
+_WITH_INFO = inspect.Signature([inspect.Parameter(name, inspect.Parameter.POSITIONAL_ONLY)
+                                for name in ('data', 'info')])
 
 
 class RecorderNode(Node):
     """Subscribe raw to every topic that has a publisher and append it to ``output``."""
 
     def __init__(self, **kwargs) -> None:
-        super().__init__('recorder', **kwargs)
+        super().__init__('recorder', **NODE_OPTIONS, **kwargs)
         config = declare_config(self, RecorderConfig)
         self.recorder = McapRecorder(config.output, flush_period_s=config.flush_period_s)
         if config.scenario:
@@ -88,7 +93,10 @@ class RecorderNode(Node):
         self.recorder.tick(time.monotonic())
 
     def _callback_for(self, topic: str):
-        def callback(data: bytes, info) -> None:
+        def callback(*args) -> None:
+            # A callback with the message info: rclpy's Executor calls it with (data, info),
+            # Jazzy's EventsExecutor with the one tuple (data, info).
+            data, info = args if len(args) == 2 else args[0]
             self._write(topic, data, info)
             # Drain what else is queued on this topic now: one executor round trip per
             # message would cap the recorder at a few thousand messages per second.
@@ -99,6 +107,7 @@ class RecorderNode(Node):
                 if taken is None:
                     break
                 self._write(topic, *taken)
+        callback.__signature__ = _WITH_INFO  # type: ignore[attr-defined]
         return callback
 
     def _write(self, topic: str, data: bytes, info) -> None:

@@ -12,13 +12,14 @@ from std_msgs.msg import Empty
 from rrtq_bringup.mission import MissionMonitor
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.executors import NODE_OPTIONS
 
 
 class SupervisorNode(Node):
     """Feeds the mission monitor from /odom, /cmd_force, /controller/state, /planner/stats."""
 
     def __init__(self, monitor: MissionMonitor, goal: np.ndarray, **kwargs) -> None:
-        super().__init__('supervisor', **kwargs)
+        super().__init__('supervisor', **NODE_OPTIONS, **kwargs)
         self.monitor = monitor
         self.goal_pub = self.create_publisher(PoseStamped, topics.GOAL_POSE, qos.LATCHED)
         goal_msg = PoseStamped()

@@ -20,6 +20,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from rrtq_common.executors import make_executor
 from rrtq_common.run import Dimensions
 from rrtq_common.settings import Kind, from_parameters, kind_of, parameter_value, spec
 
@@ -103,18 +104,25 @@ def declare_config(node: Node, cls: type[T], dims: Dimensions | None = None,
 def spin_node(factory: Callable[[], Node], args: list[str] | None = None) -> None:
     """The standard ``main()`` of a node process: init, spin, clean shutdown.
 
+    The node spins on the run's executor (:func:`rrtq_common.executors.make_executor`).
     SIGINT and SIGTERM end the spin through rclpy's signal handlers; the node is
     destroyed in every case so that it can finish its outputs (the recorder closes
     its file in ``destroy_node``).
     """
     rclpy.init(args=args)
     node = None
+    executor = make_executor()
     try:
         node = factory()
-        rclpy.spin(node)
+        executor.add_node(node)
+        # Not executor.spin(): Jazzy's EventsExecutor.spin() keeps a core busy and never
+        # lets the signal handlers run (rrtq_common.executors).
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.1)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()

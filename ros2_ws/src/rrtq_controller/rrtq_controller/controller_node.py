@@ -27,6 +27,7 @@ from rrtq_msgs.msg import (ControllerState, Disturbance, GuidanceReference, Obst
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.executors import NODE_OPTIONS
 from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import OnChange, Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
@@ -55,7 +56,7 @@ class ControllerNode(Node):
     """Answers each odometry step with a force and the controller's state."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__('controller', **kwargs)
+        super().__init__('controller', **NODE_OPTIONS, **kwargs)
         dims = declare_config(self, Dimensions)
         run = declare_config(self, RunConfig, exclude=('dt',))
         self.config = declare_config(self, ControllerConfig, dims)

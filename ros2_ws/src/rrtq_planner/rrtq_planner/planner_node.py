@@ -26,6 +26,7 @@ from visualization_msgs.msg import MarkerArray
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.executors import NODE_OPTIONS
 from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
@@ -39,7 +40,7 @@ class PlannerNode(Node):
     """RRT^X with the robot's position and the augmented obstacles."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__('planner', **kwargs)
+        super().__init__('planner', **NODE_OPTIONS, **kwargs)
         self.run = declare_config(self, RunConfig)
         self.config = declare_config(self, PlannerConfig)
         self.session: PlannerSession | None = None

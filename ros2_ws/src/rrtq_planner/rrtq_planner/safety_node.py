@@ -22,6 +22,7 @@ from rrtq_msgs.msg import ControllerState, ObstacleArray, PerceptionStatus, Safe
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.executors import NODE_OPTIONS
 from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
@@ -39,7 +40,7 @@ class SafetyNode(Node):
     """Grows the detected obstacles by the margin policy's bound on the deviation."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__('safety', **kwargs)
+        super().__init__('safety', **NODE_OPTIONS, **kwargs)
         world = load_world(declare_config(self, WorldSource).scenario)
         run = declare_config(self, RunConfig, exclude=('seed',))
         self.dims = declare_config(self, Dimensions)

@@ -17,6 +17,7 @@ from rrtq_msgs.msg import ControllerState, Disturbance
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.executors import NODE_OPTIONS
 from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate
 from rrtq_common.params import declare_config, spin_node
@@ -30,7 +31,7 @@ class DisturbanceNode(Node):
     """d(t) for every /odom step (joined with /controller/state for worst_case)."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__('disturbance_injector', **kwargs)
+        super().__init__('disturbance_injector', **NODE_OPTIONS, **kwargs)
         dims = declare_config(self, Dimensions)
         run = declare_config(self, RunConfig, exclude=('dt', 'lockstep'))
         self.config = declare_config(self, DisturbanceConfig, dims)

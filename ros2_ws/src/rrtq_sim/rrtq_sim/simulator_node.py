@@ -20,6 +20,7 @@ from std_msgs.msg import Empty
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.executors import NODE_OPTIONS
 from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate
 from rrtq_common.params import declare_config, spin_node
@@ -40,7 +41,7 @@ class SimulatorNode(Node):
     """The plant, its clock and its odometry."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__('simulator', **kwargs)
+        super().__init__('simulator', **NODE_OPTIONS, **kwargs)
         dims = declare_config(self, Dimensions, exclude=('m', 'q'))
         run = declare_config(self, RunConfig, exclude=('lockstep', 'seed'))
         plant = declare_config(self, PlantConfig, dims,

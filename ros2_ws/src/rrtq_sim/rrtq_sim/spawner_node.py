@@ -23,6 +23,7 @@ from rrtq_msgs.msg import ObstacleArray, PerceptionStatus
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
+from rrtq_common.executors import NODE_OPTIONS
 from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Step, StepGate
 from rrtq_common.params import declare_config, spin_node
@@ -36,7 +37,7 @@ class SpawnerNode(Node):
     """Publishes the known obstacle set at start and on every perception event."""
 
     def __init__(self, **kwargs: Any) -> None:
-        super().__init__('obstacle_spawner', **kwargs)
+        super().__init__('obstacle_spawner', **NODE_OPTIONS, **kwargs)
         world = load_world(declare_config(self, WorldSource).scenario)
         self.perception = Perception(world.obstacles, world.perception_radius,
                                      TrueObstacles.for_scenario(world))
