@@ -24,7 +24,8 @@ def game(gamma=20.0):
 
 
 def test_enum_values_are_the_yaml_names():
-    assert [m.value for m in DisturbanceModel] == ['none', 'constant', 'sinusoid', 'gaussian', 'worst_case']
+    assert [m.value for m in DisturbanceModel] == ['none', 'constant', 'sinusoid', 'gaussian', 'worst_case',
+                                                  'field']
     assert DisturbanceModel('worst_case') is DisturbanceModel.WORST_CASE
 
 
