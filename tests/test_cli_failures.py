@@ -125,7 +125,8 @@ def start_paced_run(tmp_path):
     while time.monotonic() < deadline:
         kids = children_of(proc.pid)
         mcap = out / 'run.mcap'
-        if len(kids) == 5 and mcap.exists() and mcap.stat().st_size > 20_000:
+        # simulator, controller, disturbance injector, spawner, recorder, viz (open loop)
+        if len(kids) == 6 and mcap.exists() and mcap.stat().st_size > 20_000:
             return proc, out, kids
         time.sleep(0.2)
     proc.kill()
