@@ -2,6 +2,7 @@
 
 import collections
 import json
+import os
 import pathlib
 import subprocess
 
@@ -36,12 +37,13 @@ STEP_TOPICS = {'/clock': 'rosgraph_msgs/msg/Clock', '/odom': 'nav_msgs/msg/Odome
                '/perception/status': 'rrtq_msgs/msg/PerceptionStatus'}
 
 
-def run(root, tmp, seed, mode, extra=()):
+def run(root, tmp, seed, mode, extra=(), executor='events'):
     scenario = tmp / f'e2e_{seed}.yaml'
     scenario.write_text(SCENARIO.format(seed=seed))
-    out = tmp / f'run_{seed}_{mode}'
+    out = tmp / f'run_{seed}_{mode}_{executor}'
     proc = subprocess.run([str(root / 'scripts/rrtq'), 'run', str(scenario), '--out', str(out),
-                           '--mode', mode, *extra], capture_output=True, text=True, timeout=180)
+                           '--mode', mode, *extra], capture_output=True, text=True, timeout=180,
+                          env={**os.environ, 'RRTQ_EXECUTOR': executor})
     return proc, out
 
 
@@ -49,8 +51,10 @@ def run(root, tmp, seed, mode, extra=()):
 def runs(tmp_path_factory):
     root = pathlib.Path(__file__).resolve().parents[1]
     tmp = tmp_path_factory.mktemp('e2e')
-    return {key: run(root, tmp, *key) for key in ((3, 'processes'), (3, 'composed'),
-                                                  (4, 'composed'))}
+    found = {key: run(root, tmp, *key) for key in ((3, 'processes'), (3, 'composed'),
+                                                   (4, 'composed'))}
+    found[(3, 'composed', 'single')] = run(root, tmp, 3, 'composed', executor='single')
+    return found
 
 
 def odom_bytes(out):
@@ -76,6 +80,13 @@ def test_lockstep_same_seed_same_odometry_in_both_modes(runs):
     processes, composed = odom_bytes(runs[(3, 'processes')][1]), odom_bytes(runs[(3, 'composed')][1])
     assert len(processes) == 81
     assert processes == composed
+
+
+def test_lockstep_same_odometry_on_either_executor(runs):
+    # rclpy's SingleThreadedExecutor against the EventsExecutor runs use (rrtq_common.executors).
+    single = odom_bytes(runs[(3, 'composed', 'single')][1])
+    assert len(single) == 81
+    assert single == odom_bytes(runs[(3, 'composed')][1])
 
 
 def test_seed_changes_the_gaussian_disturbance(runs):

@@ -17,7 +17,7 @@ from .driver import ControlOutput
 
 
 def _floats(values: ArrayLike) -> list[float]:
-    return [float(v) for v in np.asarray(values, dtype=float).ravel()]
+    return np.asarray(values, dtype=float).ravel().tolist()
 
 
 def controller_state_msg(stamp: Time, config: ControllerConfig,
