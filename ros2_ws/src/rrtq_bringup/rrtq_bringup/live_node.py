@@ -15,7 +15,7 @@ from __future__ import annotations
 import foxglove
 from rclpy.node import Node
 
-from rrtq_bringup.recorder_node import _WITH_INFO, message_class, offer_of, request_for
+from rrtq_bringup.recorder_node import message_class, offer_of, request_for, with_info
 from rrtq_bringup.recording import schema_text
 from rrtq_bringup.viz import LIVE_HOST, LiveConfig
 from rrtq_common.params import declare_config, spin_node
@@ -55,12 +55,9 @@ class LiveNode(Node):
 
     @staticmethod
     def _forward(channel: foxglove.Channel):
-        def callback(*args) -> None:
-            # rclpy's Executor passes (data, info), Jazzy's EventsExecutor the one tuple
-            data, info = args if len(args) == 2 else args[0]
+        def callback(data: bytes, info) -> None:
             channel.log(data, log_time=info['received_timestamp'])
-        callback.__signature__ = _WITH_INFO  # type: ignore[attr-defined]
-        return callback
+        return with_info(callback)
 
     def destroy_node(self) -> None:
         self.server.stop()

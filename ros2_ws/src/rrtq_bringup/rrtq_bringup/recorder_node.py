@@ -6,6 +6,8 @@ import importlib
 import inspect
 import pathlib
 import time
+from collections.abc import Callable
+from typing import Any
 
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -63,6 +65,19 @@ _WITH_INFO = inspect.Signature([inspect.Parameter(name, inspect.Parameter.POSITI
                                 for name in ('data', 'info')])
 
 
+def with_info(handle: Callable[[bytes, Any], None]) -> Callable[..., None]:
+    """A raw subscription callback that gets the message info, under either executor.
+
+    rclpy's Executor calls it with (data, info), Jazzy's EventsExecutor with the one tuple
+    (data, info); rclpy reads the signature to decide whether to pass the info at all.
+    """
+    def callback(*args) -> None:
+        data, info = args if len(args) == 2 else args[0]
+        handle(data, info)
+    callback.__signature__ = _WITH_INFO  # type: ignore[attr-defined]
+    return callback
+
+
 class RecorderNode(Node):
     """Subscribe raw to every topic that has a publisher and append it to ``output``."""
 
@@ -93,10 +108,7 @@ class RecorderNode(Node):
         self.recorder.tick(time.monotonic())
 
     def _callback_for(self, topic: str):
-        def callback(*args) -> None:
-            # A callback with the message info: rclpy's Executor calls it with (data, info),
-            # Jazzy's EventsExecutor with the one tuple (data, info).
-            data, info = args if len(args) == 2 else args[0]
+        def callback(data: bytes, info) -> None:
             self._write(topic, data, info)
             # Drain what else is queued on this topic now: one executor round trip per
             # message would cap the recorder at a few thousand messages per second.
@@ -107,8 +119,7 @@ class RecorderNode(Node):
                 if taken is None:
                     break
                 self._write(topic, *taken)
-        callback.__signature__ = _WITH_INFO  # type: ignore[attr-defined]
-        return callback
+        return with_info(callback)
 
     def _write(self, topic: str, data: bytes, info) -> None:
         self.recorder.write(topic, data, info['received_timestamp'], info['source_timestamp'],
