@@ -195,6 +195,11 @@ class ControllerConfig:
     value_tolerance: float = setting(0.01, **_POSITIVE, doc="guard: largest negative part of a "
                                      "policy's value on the stored samples, as a fraction "
                                      'of the sum of its absolute values')
+    coverage_quantile: float = setting(0.02, low=0.0, high=1.0, doc='guard: the proposal is '
+                                       'followed only at times-to-go above this quantile of '
+                                       "the stored samples' (held at its value there below)")
+    """Where the critic has no data its greedy gain is the time basis' extrapolation
+    (:func:`guard.held_below`); 0: follow it on the whole horizon (the papers)."""
     trust_growth: float = setting(1.0, **_POSITIVE, doc='guard: trust region of one adoption, '
                                   '|dK(τ)| <= trust_growth max(|K(τ)|, K_floor)')
     """The gain may grow by this factor per adoption (1: double), from a floor set by the

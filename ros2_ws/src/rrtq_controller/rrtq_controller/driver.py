@@ -197,7 +197,10 @@ class LearningDriver(Driver):
             return self._output(np.zeros(self.m), x, event.value, t)
         if event is LegEvent.NEW_LEG:
             c.start_leg(self.legs.x_bar(x), t, completed=self.legs.completed)
-        elif event is LegEvent.GOAL_REACHED:
+        elif (event is LegEvent.GOAL_REACHED and self.legs.leg is not None
+              and self.legs.leg.d0 > self.legs.skip_radius):
+            # a leg to where the robot already is (the hold before the first path, or
+            # while there is none) proves nothing about the policy
             c.completed_leg()
         u = c.step(t, self.legs.x_bar(x),
                    None if d_applied is None else np.asarray(d_applied, dtype=float))

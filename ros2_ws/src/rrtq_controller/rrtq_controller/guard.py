@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -54,6 +55,32 @@ def trust_step(change: Array, current: Array, floor: float, growth: float) -> fl
     radius = growth * np.maximum(current, floor)
     over = change > radius
     return float(np.min(radius[over] / change[over])) if over.any() else 1.0
+
+
+def held_below(batch: Callable[[Array], Array], W: Array, tau_low: float, horizon: float,
+               points: int = 41) -> Array:
+    """Weights whose gain is W's for τ >= ``tau_low`` and held at its value there below.
+
+    A critic identifies the Q-function only at the times-to-go its samples cover; below
+    them its greedy gain is an extrapolation of the time basis, and on the rover without
+    a spring it once pushed the robot away near the end of a long leg (K̂(1 s) = -81 N/m
+    against the optimum's +4.6). The proposal is therefore re-expressed, in the same time
+    basis ``batch`` (τ -> φ(τ), (N,) -> (N, L)), as the least-squares fit on a grid of
+    [0, horizon] to the gain W gives at max(τ, ``tau_low``): the gain of a longer horizon
+    where the data say nothing, as a receding-horizon controller would use. The gain is
+    linear in W, so this is one small least-squares problem on the weights
+    (L x (n m)). The refit is not exact where the samples do cover, so it is made only
+    when the uncovered part is worth it: ``tau_low`` above 5 % of the horizon (the last
+    half second of a 10 s leg); below, W is returned unchanged.
+    """
+    if tau_low <= 0.05 * horizon:
+        return W
+    taus = np.linspace(0.0, horizon, points)
+    phi = batch(taus)
+    coef = W.reshape(phi.shape[1], -1)
+    held = batch(np.maximum(taus, tau_low)) @ coef
+    fit = np.linalg.lstsq(phi, held, rcond=None)[0]
+    return np.asarray(fit.reshape(W.shape), dtype=float)
 
 
 @dataclass

@@ -132,9 +132,9 @@ class LegSequencer:
         last = self._next >= len(self._waypoints) - 1
         self.completed = False
         if inside and not last:
+            self.completed = self.leg.d0 > self.skip_radius   # a leg of no length proves nothing
             self._next += 1
             self._start(x, t)
-            self.completed = True
             return LegEvent.NEW_LEG
         if inside and last:
             if not self.goal_reached:

@@ -29,7 +29,7 @@ from .basis import QuadraticBasis, TimeBasis
 from .bellman import Policy, bellman_rows
 from .config import ActorLaw, ControllerConfig, StepInfo, Variant
 from .critic import LeastSquaresCritic, fit, make_critic, residual
-from .guard import DivergenceWatch, PolicyEvent, trust_step
+from .guard import DivergenceWatch, PolicyEvent, held_below, trust_step
 from .probing import Probing
 from .readout import WeightReadout, _features
 from .stability import gain_warnings
@@ -269,13 +269,16 @@ class QLearningController(WeightReadout):
 
         1. The critic that proposes it is trusted (:meth:`policy_evaluation`) and its fit
            explains the data: relative residual <= ``max_fit_residual``.
-        2. Trust region: the step from the current target toward the critic's greedy
+        2. Coverage: below the times-to-go the stored samples cover (their
+           ``coverage_quantile``), the proposal's gain is held at its value at that edge
+           (:func:`guard.held_below`): the critic is not followed where it extrapolates.
+        3. Trust region: the step from the current target toward the critic's greedy
            weights is shortened until ‖ΔK̂(τ)‖ <= ``trust_growth`` max(‖K̂(τ)‖, K_floor)
            on a grid of τ (every direction of the gain, not only those the data visit),
            K_floor being the probing scale (or the RMS force applied in the data) over
            the RMS size of the stored states; and until the force it adds on the stored
            states stays within the force limit (:func:`guard.trust_step`).
-        3. The proposed policy, evaluated off-policy on the same data (a least-squares fit
+        4. The proposed policy, evaluated off-policy on the same data (a least-squares fit
            of its own Q-function, :func:`critic.fit`), fits as well as in 1 and its value
            is positive on the data: a negative share of at most ``value_tolerance``, or
            no more than the current target's own under the critic (where a leg enters
@@ -297,9 +300,13 @@ class QLearningController(WeightReadout):
                                              f' > {c.max_fit_residual:g}')
             return
         Wa, Wd = self._target
-        greedy_a = -self._greedy('u').T
-        greedy_d = self.gamma ** -2 * self._greedy('d').T if self.robust else Wd
         tau0, x0, _, _, u_applied, _ = window.samples()
+        # only where the data are: below the times-to-go the samples cover, the greedy
+        # gain is held at its value at their edge (guard.held_below)
+        tau_low = float(np.quantile(tau0, c.coverage_quantile))
+        held = partial(held_below, self.time_basis.batch, tau_low=tau_low, horizon=c.horizon)
+        greedy_a = held(-self._greedy('u').T)
+        greedy_d = held(self.gamma ** -2 * self._greedy('d').T) if self.robust else Wd
         Z = (self.time_basis.batch(tau0)[:, :, None] * x0[:, None, :]).reshape(len(x0), -1)
         # the floor of the trust region: the probing scale or the forces applied so far,
         # over the size of the states they were applied in (N per state unit)
@@ -313,20 +320,25 @@ class QLearningController(WeightReadout):
         allowed = max(c.value_tolerance, self._negative_value_share(self.critic.theta, Wa, Wd))
         if du * s > c.force_limit:    # never a change beyond the actuator's range on the data
             s = c.force_limit / du
+        why = ''
         for _ in range(4):
             cand = (Wa + s * (greedy_a - Wa), Wd + s * (greedy_d - Wd))
             theta, residual = fit(partial(self._rows, policy=cand), window,
                                   self.critic.theta, c.ridge)
-            if (residual <= c.max_fit_residual
-                    and self._negative_value_share(theta, *cand) <= allowed
-                    and (self._completed is None or self._definite_value(theta, *cand))):
+            share = self._negative_value_share(theta, *cand)
+            if residual > c.max_fit_residual:
+                why = f'fit residual {residual:.3g} > {c.max_fit_residual:g}'
+            elif share > allowed:
+                why = f'negative value share {share:.3g} > {allowed:.3g}'
+            elif self._completed is not None and not self._definite_value(theta, *cand):
+                why = 'value kernel not positive definite on [T/2, T]'
+            else:
                 self._target = (cand[0].copy(), cand[1].copy())
                 self._adopted_since = True
                 self._note(PolicyEvent.ADOPTED, f'step {s:.3g} of the greedy change')
                 return
             s *= 0.5
-        self._note(PolicyEvent.REJECTED, 'proposal: its value is not positive definite or its '
-                                         f'fit residual exceeds {c.max_fit_residual:g}')
+        self._note(PolicyEvent.REJECTED, f'proposal (step {2 * s:.3g}): {why}')
 
     def _definite_value(self, theta: Array, Wa: Array, Wd: Array) -> bool:
         """Whether a policy's value kernel under a critic fit is positive definite on [T/2, T]."""

@@ -7,7 +7,7 @@ controller never sees.
 import numpy as np
 
 from rrtq_controller.config import ControllerConfig
-from rrtq_controller.guard import DivergenceWatch, PolicyEvent, trust_step
+from rrtq_controller.guard import DivergenceWatch, PolicyEvent, held_below, trust_step
 from rrtq_controller.q_learning import QLearningController
 from rrtq_testing import controller_reference as ref
 
@@ -162,3 +162,30 @@ def test_trust_step_bounds_the_change_by_the_current_size_or_the_floor():
     s = trust_step(np.array([8.0, 1.0]), current, floor=0.5, growth=1.0)
     assert np.isclose(s, 2.0 / 8.0)
     assert np.isclose(trust_step(np.array([10.0]), np.zeros(1), floor=0.5, growth=1.0), 0.05)
+
+
+def test_a_proposal_is_held_where_no_sample_covers_its_times_to_go():
+    """The extrapolation once seen in the graph (rover without a spring, legs that end in
+    their window at τ ≈ 4 s): a greedy gain that matches the Riccati gain where the data
+    are and whose position gain swings to -80 N/m by τ = 0 where they are not. Held
+    below τ = 4 s, the gain keeps its value there (within 20 %, what the four time functions can represent; and its sign)
+    and from 1 s above it on is unchanged (within 10 %)."""
+    A, B = ref.rover(stiffness=0.0)
+    ctrl = QLearningController(ControllerConfig(), 4, 2, 0, np.random.default_rng(0))
+    riccati = ref.riccati(A, B, M, R, P_T, T)
+    taus = np.linspace(0.0, T, 81)
+    gains = np.array([np.linalg.solve(R, B.T @ riccati(t)) for t in taus])
+    swing = np.clip(4.0 - taus, 0.0, None) / 4.0
+    gains[:, 0, 0] -= 100.0 * swing
+    gains[:, 1, 1] -= 100.0 * swing
+    W = np.linalg.lstsq(ctrl.time_basis.batch(taus), (-gains.transpose(0, 2, 1)).reshape(len(taus), -1),
+                        rcond=None)[0].reshape(-1, 2)
+    assert ctrl.gain(0.5, W)[0, 0] < -50.0                   # what the critic would propose
+    H = held_below(ctrl.time_basis.batch, W, 4.0, T)
+    edge = ctrl.gain(4.0, W)
+    for t in np.linspace(0.0, 3.0, 7):
+        assert np.linalg.norm(ctrl.gain(t, H) - edge) <= 0.2 * np.linalg.norm(edge)
+    for t in np.linspace(5.0, T, 6):
+        assert np.linalg.norm(ctrl.gain(t, H) - ctrl.gain(t, W)) <= 0.1 * np.linalg.norm(ctrl.gain(t, W))
+    assert min(ctrl.gain(t, H)[0, 0] for t in taus) > 0.0
+    assert held_below(ctrl.time_basis.batch, W, 0.4, T) is W   # covered to 0.4 s: unchanged
