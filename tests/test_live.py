@@ -2,11 +2,12 @@
 
 The client speaks the protocol itself (the ``websockets`` package): server info, the
 advertised channels, a subscription, and the binary message frames, whose CDR payloads are
-decoded with mcap_ros2's decoder from the schema text the server advertised. It offers the
-two subprotocol names the Foxglove app offers: the official SDK's server answers to
-``foxglove.sdk.v1`` only (a client that offers nothing but the older name
-``foxglove.websocket.v1`` is refused, which the test checks too, since docs/design.md says
-so). The listening sockets are read from /proc/net.
+decoded with mcap_ros2's decoder from the schema text the server advertised. Two clients
+watch the same run at once: one offers only the protocol's older subprotocol name
+``foxglove.websocket.v1`` (older Foxglove and Lichtblick releases, ws-protocol clients) and
+must be answered under that name, one offers both names as the Foxglove app does and gets
+``foxglove.sdk.v1`` (the official SDK's name, rrtq_bringup.ws_alias). The listening sockets
+are read from /proc/net.
 """
 
 import asyncio
@@ -21,7 +22,9 @@ import time
 from mcap.records import Schema
 from mcap_ros2.decoder import DecoderFactory
 from websockets.asyncio.client import connect
-from websockets.exceptions import InvalidStatus
+from websockets.exceptions import ConnectionClosed
+
+from rrtq_bringup.ws_alias import rename_request, rename_response
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -33,7 +36,7 @@ seed: 2
 bounds: {x: [-40, 40], y: [-40, 40]}
 start: [0.0, 0.0]
 goal: [30.0, 30.0]
-duration: 300.0
+duration: 3000.0
 perception_radius: 6.0
 robot_radius: 0.3
 plant: {model: rover, stiffness: 0.0, force_limit: 100.0}
@@ -44,6 +47,8 @@ obstacles:
   - {id: post, polygon: [[3, -1], [4, -1], [4, 0], [3, 0]], known: true}
 """
 OFFERED = ['foxglove.sdk.v1', 'foxglove.websocket.v1']     # as the Foxglove app offers them
+OLD_ONLY = ['foxglove.websocket.v1']                         # as older clients offer it
+RESUBSCRIBE_S = 3.0
 WANTED = ('/odom', '/viz/obstacles/truth', '/tf')
 
 
@@ -68,29 +73,43 @@ def listening(port: int) -> list[str]:
     return found
 
 
-async def watch(port: int, deadline: float) -> tuple[dict, dict, dict, bool]:
-    """Connect, read server info and adverts, subscribe to WANTED, decode one message each.
+async def watch(port: int, deadline: float, offered: list[str]) -> tuple[str, dict, dict, dict]:
+    """Connect offering ``offered``; server info, adverts, one decoded message of each WANTED.
 
-    Also: whether a client offering only ``foxglove.websocket.v1`` is refused.
+    Returns the subprotocol the server chose, the server info, the channels and the
+    decoded messages.
     """
     while True:
         try:
-            ws = await connect(f'ws://127.0.0.1:{port}', subprotocols=OFFERED, max_size=None)
+            ws = await connect(f'ws://127.0.0.1:{port}', subprotocols=offered, max_size=None)
             break
         except OSError:
             assert time.monotonic() < deadline, 'the live server never accepted a connection'
             await asyncio.sleep(0.2)
-    try:
-        async with connect(f'ws://127.0.0.1:{port}', subprotocols=['foxglove.websocket.v1']):
-            old_name_refused = False
-    except InvalidStatus as refusal:
-        old_name_refused = refusal.response.status_code == 400
     async with ws:
-        assert ws.subprotocol == 'foxglove.sdk.v1'
-        info, channels, decoded, subscribed = None, {}, {}, {}
+        chosen = ws.subprotocol
+        info, channels, decoded, subscribed, asked = None, {}, {}, {}, {}
+
+        async def subscribe(topic: str) -> None:
+            sub_id = len(subscribed) + 1
+            subscribed[sub_id], asked[topic] = topic, time.monotonic()
+            await ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [
+                {'id': sub_id, 'channelId': channels[topic]['id']}]}))
+
         factory = DecoderFactory()
         while time.monotonic() < deadline and len(decoded) < len(WANTED):
-            frame = await asyncio.wait_for(ws.recv(), timeout=max(0.1, deadline - time.monotonic()))
+            # A subscription sent right after a channel's advert is sometimes refused by the
+            # SDK's server ("attempted to subscribe to unknown channel"): a client asks again
+            # after RESUBSCRIBE_S without data, as a viewer's panel would.
+            for topic, when in list(asked.items()):
+                if topic not in decoded and time.monotonic() - when > RESUBSCRIBE_S:
+                    await subscribe(topic)
+            try:
+                frame = await asyncio.wait_for(ws.recv(), timeout=0.5)
+            except asyncio.TimeoutError:
+                continue
+            except ConnectionClosed:         # the run ended: what was seen is judged below
+                break
             if isinstance(frame, str):
                 op = json.loads(frame)
                 if op['op'] == 'serverInfo':
@@ -98,11 +117,8 @@ async def watch(port: int, deadline: float) -> tuple[dict, dict, dict, bool]:
                 elif op['op'] == 'advertise':
                     for channel in op['channels']:
                         channels[channel['topic']] = channel
-                        if channel['topic'] in WANTED and channel['topic'] not in subscribed.values():
-                            sub_id = len(subscribed) + 1
-                            subscribed[sub_id] = channel['topic']
-                            await ws.send(json.dumps({'op': 'subscribe', 'subscriptions': [
-                                {'id': sub_id, 'channelId': channel['id']}]}))
+                        if channel['topic'] in WANTED and channel['topic'] not in asked:
+                            await subscribe(channel['topic'])
                 continue
             if frame[0] != 0x01:                               # 0x01: message data
                 continue
@@ -115,7 +131,12 @@ async def watch(port: int, deadline: float) -> tuple[dict, dict, dict, bool]:
             schema = Schema(id=channel['id'], name=channel['schemaName'],
                             encoding=channel['schemaEncoding'], data=channel['schema'].encode())
             decoded[topic] = factory.decoder_for(channel['encoding'], schema)(frame[13:])
-    return info, channels, decoded, old_name_refused
+    return chosen, info, channels, decoded
+
+
+async def both(port: int, deadline: float) -> list[tuple[str, dict, dict, dict]]:
+    """The two clients at once, as two viewers of the same run."""
+    return list(await asyncio.gather(watch(port, deadline, OLD_ONLY), watch(port, deadline, OFFERED)))
 
 
 def test_live_view_serves_the_running_graph_on_loopback_only(tmp_path):
@@ -126,8 +147,7 @@ def test_live_view_serves_the_running_graph_on_loopback_only(tmp_path):
                              str(tmp_path / 'run'), '--mode', 'composed', '--live', str(port)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        info, channels, decoded, old_name_refused = asyncio.run(
-            watch(port, time.monotonic() + 60.0))
+        seen = dict(zip((OLD_ONLY[0], OFFERED[0]), asyncio.run(both(port, time.monotonic() + 60.0))))
         addresses = listening(port)
     finally:
         proc.send_signal(signal.SIGINT)
@@ -139,16 +159,34 @@ def test_live_view_serves_the_running_graph_on_loopback_only(tmp_path):
     summary = json.loads(stdout)
     assert summary['outcome'] == 'interrupted', stderr
     assert addresses == ['127.0.0.1']
-    assert info is not None and info['name'] == 'rrtq'
-    assert {'/odom', '/cmd_force', '/viz/obstacles/truth', '/tf'} <= set(channels)
-    assert channels['/odom']['schemaName'] == 'nav_msgs/msg/Odometry'
-    assert all(c['encoding'] == 'cdr' and c['schemaEncoding'] == 'ros2msg'
-               for c in channels.values())
-    assert set(decoded) == set(WANTED), f'received only {sorted(decoded)}'
-    assert decoded['/odom'].child_frame_id == 'base_link'
-    assert [m.text for m in decoded['/viz/obstacles/truth'].markers] == ['post']
-    assert decoded['/tf'].transforms[0].child_frame_id == 'base_link'
-    assert old_name_refused
+    chosen = {offer: seen[offer][0] for offer in seen}
+    assert chosen == {'foxglove.websocket.v1': 'foxglove.websocket.v1',    # the name it asked for
+                      'foxglove.sdk.v1': 'foxglove.sdk.v1'}
+    for _, info, channels, decoded in seen.values():
+        assert info is not None and info['name'] == 'rrtq'
+        assert {'/odom', '/cmd_force', '/viz/obstacles/truth', '/tf'} <= set(channels)
+        assert channels['/odom']['schemaName'] == 'nav_msgs/msg/Odometry'
+        assert all(c['encoding'] == 'cdr' and c['schemaEncoding'] == 'ros2msg'
+                   for c in channels.values())
+        assert set(decoded) == set(WANTED), f'received only {sorted(decoded)} of {sorted(channels)}'
+        assert decoded['/odom'].child_frame_id == 'base_link'
+        assert [m.text for m in decoded['/viz/obstacles/truth'].markers] == ['post']
+        assert decoded['/tf'].transforms[0].child_frame_id == 'base_link'
     # The run went on while it was watched, and its recording has what the viewer saw.
     assert summary['sim_time_s'] > 0.0
     assert (tmp_path / 'run' / 'run.mcap').exists()
+
+
+def test_the_alias_renames_only_an_offer_of_the_older_name_alone():
+    """The handshake rewrite of rrtq_bringup.ws_alias, on the head bytes themselves."""
+    head = (b'GET / HTTP/1.1\r\nHost: 127.0.0.1:8765\r\nUpgrade: websocket\r\n'
+            b'Sec-WebSocket-Protocol: foxglove.websocket.v1\r\n\r\n')
+    renamed, did = rename_request(head)
+    assert did and b'Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n' in renamed
+    assert renamed.replace(b'foxglove.sdk.v1', b'foxglove.websocket.v1') == head
+    both = head.replace(b'foxglove.websocket.v1', b'foxglove.sdk.v1, foxglove.websocket.v1')
+    assert rename_request(both) == (both, False)
+    other = head.replace(b'foxglove.websocket.v1', b'chat')
+    assert rename_request(other) == (other, False)
+    answer = b'HTTP/1.1 101 Switching Protocols\r\nsec-websocket-protocol: foxglove.sdk.v1\r\n\r\n'
+    assert rename_response(answer) == answer.replace(b'foxglove.sdk.v1', b'foxglove.websocket.v1')
