@@ -102,14 +102,12 @@ def integral_curve(field: CompositeField, start: npt.ArrayLike, length: float,
                 angle = math.atan2(lead[0] * direction[1] - lead[1] * direction[0],
                                    float(lead @ direction))
                 if abs(angle) <= turn and len(pts) > 1:
-                    lead = None
+                    lead = None          # aligned: the field's from here on
                 else:
-                    field_direction, direction = direction, lead
                     a = math.copysign(min(turn, abs(angle)), angle)
                     c, s = math.cos(a), math.sin(a)
-                    lead = np.array([c * lead[0] - s * lead[1], s * lead[0] + c * lead[1]])
-                    if abs(angle) <= turn:
-                        lead = field_direction
+                    direction, lead = lead, np.array([c * lead[0] - s * lead[1],
+                                                      s * lead[0] + c * lead[1]])
         st.direction = direction
         st.progress = max(q.s, st.progress - field.WINDOW_BACK / 2.0)
         to_goal = float(np.hypot(*(xi - goal)))
