@@ -89,6 +89,10 @@ def integral_curve(field: CompositeField, start: npt.ArrayLike, length: float,
     while travelled < length:
         chi, q = field.vector(xi, st)
         norm = float(np.hypot(*chi))
+        if st.direction is not None and norm > 0.0 and float(chi @ st.direction) < 0.0 \
+                and field.reverse_at_sink(xi, st):
+            chi, q = field.vector(xi, st)      # the curve turned back: a sink (field.py)
+            norm = float(np.hypot(*chi))
         if norm >= cfg.deadlock_epsilon or st.direction is None:
             direction = chi / norm if norm > 0.0 else -np.array([-q.grad[1], q.grad[0]])
         else:
