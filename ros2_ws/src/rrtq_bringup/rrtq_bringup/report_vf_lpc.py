@@ -59,8 +59,12 @@ def lateral_acceleration(odom_t: np.ndarray, odom_x: np.ndarray
     """|v x a| / |v| (= v²κ) and the jerk's norm along the driven path, per odometry step.
 
     Acceleration and jerk by central differences of the recorded velocity; samples slower
-    than 0.1 m/s are left out of v²κ (the curvature of a path at rest means nothing).
+    than 0.1 m/s are left out of v²κ (the curvature of a path at rest means nothing). A
+    repeated stamp (the simulator republishes a step's odometry when an acknowledgement is
+    late, docs/design.md) is one sample: only its first message is kept.
     """
+    keep = np.r_[True, np.diff(odom_t) > 0.0] if len(odom_t) else np.zeros(0, bool)
+    odom_t, odom_x = odom_t[keep], odom_x[keep]
     if len(odom_t) < 5:
         return np.zeros(0), np.zeros(0)
     v = odom_x[:, 2:4]

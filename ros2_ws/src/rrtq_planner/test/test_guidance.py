@@ -6,7 +6,9 @@ circumradius of consecutive reference points (Heron's formula here), speed from 
 differences, analytic fillet geometry, and RRT^X paths from the planner core.
 """
 
+import json
 import math
+import pathlib
 
 import numpy as np
 import pytest
@@ -177,3 +179,27 @@ def test_reference_window_follows_the_robot():
 def test_bad_config_names_the_field(key, value):
     with pytest.raises(ValueError, match=key if key != 'reactive_width' else 'repulsive'):
         GuidanceConfig(**{key: value})
+
+
+def test_a_sink_of_the_composite_field_is_left_not_shuttled_in():
+    # Recorded in the graph (data/guidance_sink.json): next to an obstacle the sense of
+    # circulation chosen where the curve met it comes to oppose the path field, which
+    # bends back; the composite field has a sink there (it points back at it from both
+    # sides), the discrete curve shuttled between two points, and the rollout stalled.
+    # The curve's own reversal flips that obstacle's sense once: it goes on to the goal.
+    case = json.loads((pathlib.Path(__file__).parent / 'data' / 'guidance_sink.json')
+                      .read_text())
+    state = np.array(case['state'])
+    obstacles = [np.array(p) for p in case['obstacles']]
+    path = np.vstack((state[None, :2], case['plan']))
+    track = GuidanceTrack(path, obstacles, CFG)
+    for velocity in (None, state[2:]):
+        curve = track.roll(state[:2], velocity)
+        assert curve.status is CurveStatus.REACHED
+        referee = PolygonSet(obstacles)
+        assert min(referee.nearest(p)[0] for p in curve.points) > CFG.repulsive_offset
+        steps = np.diff(curve.points[:-1], axis=0)          # the appended goal left out
+        turn_back = np.einsum('ij,ij->i', steps[1:], steps[:-1]) < 0.0
+        assert turn_back.sum() <= 1            # at most the one reversal that flips it
+        # No detour: at most half as long again as the path.
+        assert CFG.step * len(curve.points) <= 1.5 * track.path.length

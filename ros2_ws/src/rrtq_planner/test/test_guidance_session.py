@@ -87,3 +87,37 @@ def test_track_is_kept_while_passed_waypoints_drop_and_rebuilt_on_changes():
     out = session.cycle(0.2, state, np.zeros((0, 2)), 5, obstacles(4, DISC))
     assert session.track is None and out.status is ReferenceStatus.NO_PATH
     assert out.rollout == 3
+
+
+def test_a_rebuilt_track_continues_the_robots_motion():
+    # The robot flies north at 2 m/s when a new plan sends it east: the new curve must
+    # leave along its velocity and turn within v²κ <= a_max at the robot's speed.
+    state = np.array([0.0, 0.0, 0.0, 2.0])
+    session = GuidanceSession(CONFIG)
+    out = session.cycle(0.0, state, np.array([[20.0, 0.0]]), 1, obstacles(1))
+    ref = out.reference
+    assert np.allclose(ref.velocities[0], state[2:], atol=1e-9)   # heading and speed kept
+    lateral = lateral_acceleration(ref.positions, CONFIG.dt)
+    moving = np.hypot(*ref.velocities[1:-1].T) > 0.1
+    assert lateral[moving].max() <= 1.05 * CONFIG.a_max
+    # The turn the robot can fly at 2 m/s (radius v²/a_max = 2 m) takes it that far north.
+    assert ref.positions[:, 1].max() >= 0.8 * state[3] ** 2 / CONFIG.a_max
+    # Then it is back on the path, heading east at v_max.
+    assert abs(ref.positions[-1, 1]) < 0.3 and ref.velocities[-1, 0] > 0.9 * CONFIG.v_max
+    # A robot at rest turns at once, as before.
+    rest = GuidanceSession(CONFIG).cycle(0.0, np.zeros(4), np.array([[20.0, 0.0]]), 1,
+                                         obstacles(1)).reference
+    assert np.abs(rest.positions[:, 1]).max() < 1e-9
+
+
+def test_the_connector_yields_to_an_obstacle_ahead():
+    # Heading at 2 m/s for a disc 1.2 m ahead while the path goes east: the connector's
+    # turn (radius v²/(0.8 a_max) = 2.5 m about (2.5, 0)) would cut 0.17 m into the disc;
+    # the field takes over near the obstacle and the curve keeps off its Q boundary.
+    disc = polygon_from_circle((0.0, 2.2), 1.0, 24)
+    state = np.array([0.0, 0.0, 0.0, 2.0])
+    session = GuidanceSession(CONFIG)
+    session.cycle(0.0, state, np.array([[20.0, 0.0]]), 1, obstacles(2, disc))
+    curve = session.track.curve
+    clearance = np.array([PolygonSet([disc]).nearest(p)[0] for p in curve.points])
+    assert clearance.min() > CONFIG.repulsive_offset

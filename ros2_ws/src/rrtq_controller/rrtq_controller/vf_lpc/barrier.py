@@ -35,6 +35,13 @@ class EdgeSet:
         self._ab = np.concatenate([np.roll(p, -1, axis=0) - p for p in polys]) if polys \
             else np.zeros((0, 2))
         self._len2 = np.maximum(np.einsum('ij,ij->i', self._ab, self._ab), 1e-300)
+        # Edge indices per polygon, (K, E_max), padded with the polygon's first edge (the
+        # mask leaves the padding out of the crossing count): one argmin for all polygons.
+        sizes = self._ends - self._starts
+        k = np.arange(int(sizes.max()) if polys else 0)
+        self._mask = k[None, :] < sizes[:, None]
+        self._pad = np.where(self._mask, self._starts[:, None] + k[None, :],
+                             self._starts[:, None])
 
     def signed(self, points: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray]:
         """Signed distances (N, K) and unit gradients (N, K, 2), K polygons.
@@ -43,22 +50,22 @@ class EdgeSet:
         """
         p = np.asarray(points, dtype=float).reshape(-1, 2)
         a, ab = self._a, self._ab
-        ap = p[:, None, :] - a[None, :, :]                           # (N, E, 2)
-        s = (ap[..., 0] * ab[:, 0] + ap[..., 1] * ab[:, 1]) / self._len2
+        px, py = p[:, 0:1], p[:, 1:2]
+        apx, apy = px - a[:, 0], py - a[:, 1]                        # (N, E)
+        s = (apx * ab[:, 0] + apy * ab[:, 1]) / self._len2
         np.clip(s, 0.0, 1.0, out=s)
-        diff = ap - s[..., None] * ab
-        d2 = diff[..., 0] ** 2 + diff[..., 1] ** 2
+        dx, dy = apx - s * ab[:, 0], apy - s * ab[:, 1]
+        d2 = dx * dx + dy * dy
         ay, by = a[:, 1], a[:, 1] + ab[:, 1]
-        cross = ab[:, 0] * ap[..., 1] - ab[:, 1] * ap[..., 0]
-        left = ((ay > p[:, 1:2]) != (by > p[:, 1:2])) & ((cross > 0.0) == (by > ay))
-        crossings = np.add.reduceat(left, self._starts, axis=1)
-        rows = np.arange(len(p))
-        dist = np.empty((len(p), self.count))
-        grad = np.empty((len(p), self.count, 2))
-        for i, (lo, hi) in enumerate(zip(self._starts, self._ends)):
-            j = lo + np.argmin(d2[:, lo:hi], axis=1)
-            dist[:, i] = np.sqrt(d2[rows, j])
-            grad[:, i] = diff[rows, j] / np.maximum(dist[:, i], 1e-12)[:, None]
+        cross = ab[:, 0] * apy - ab[:, 1] * apx
+        left = ((ay > py) != (by > py)) & ((cross > 0.0) == (by > ay))
+        crossings = (left[:, self._pad] & self._mask).sum(axis=2)   # (N, K)
+        j = np.argmin(d2[:, self._pad], axis=2)
+        edge = self._pad[np.arange(self.count)[None, :], j]          # nearest edge, (N, K)
+        rows = np.arange(len(p))[:, None]
+        dist = np.sqrt(d2[rows, edge])
+        inv = 1.0 / np.maximum(dist, 1e-12)
+        grad = np.stack((dx[rows, edge] * inv, dy[rows, edge] * inv), axis=-1)
         sign = np.where(crossings % 2 == 1, -1.0, 1.0)
         return sign * dist, grad * sign[..., None]
 

@@ -116,6 +116,7 @@ class RecedingHorizonActorCritic:
         self._hi = config.force_limit * np.ones(N * m)
         self._weights = np.concatenate((np.broadcast_to(self.Q, (N - 1, n, n)),
                                         self.P[None]))          # stages 1..N
+        self._R2 = np.kron(np.eye(N), 2.0 * self.R)
         self._us: np.ndarray | None = None
         self._xs: np.ndarray | None = None
         self._edges: EdgeSet | None = None
@@ -178,7 +179,7 @@ class RecedingHorizonActorCritic:
         U = us.reshape(-1)
         xs = free + gam @ U
         cost, bar = self._stage_cost(xs, us, ref, edges)
-        R2 = np.kron(np.eye(N), 2.0 * self.R)
+        R2 = self._R2
         done = 0
         for it in range(cfg.iterations):
             if it:
@@ -192,10 +193,11 @@ class RecedingHorizonActorCritic:
             w = 2.0 * np.einsum('kij,kj->ki', self._weights, xs - ref[1:])
             W[:, :2, :2] += bar[2]
             w[:, :2] += bar[1]
-            WG = np.einsum('kij,kjl->kil', W, gam)                       # (N, n, N m)
-            H = np.einsum('kil,kij->lj', gam, WG) + R2
+            # Gammaᵀ W Gamma as one (N n) x (N m) product (BLAS; einsum was 5x slower).
+            G2 = gam.reshape(N * self.n, N * m)
+            H = G2.T @ np.matmul(W, gam).reshape(N * self.n, N * m) + R2
             # gradient of the model at U: Gammaᵀ w + 2 R U; Newton about U.
-            grad = np.einsum('kil,ki->l', gam, w) + R2 @ U
+            grad = G2.T @ w.reshape(-1) + R2 @ U
             g = grad - H @ U
             target = box_qp(H, g, self._lo, self._hi, U)
             done += 1

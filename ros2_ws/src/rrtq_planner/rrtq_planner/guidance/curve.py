@@ -9,6 +9,10 @@
   pass from the robot's speed and a backward pass to rest at the goal (our addition: a
   reference the plant can follow in both directions).
 - time: constant acceleration between curve points, sampled at ``dt``.
+- connector (our addition): a curve rolled out from a moving robot leaves it along its
+  velocity and turns towards the field no faster than curvature
+  ``LEAD_FRACTION a_max / |v|²`` (a turn the robot can fly at its speed) until its step is
+  the field's; near an obstacle the field takes over at once.
 """
 
 from __future__ import annotations
@@ -24,6 +28,8 @@ from .field import CompositeField, RolloutState
 
 # Points either side whose curvature bounds a point's speed.
 KAPPA_REACH = 3
+# The connector from a moving robot turns at this share of a_max / |v|² at most.
+LEAD_FRACTION = 0.8
 
 __all__ = ['Curve', 'Reference', 'integral_curve', 'menger_curvature', 'speed_profile',
            'sample_in_time']
@@ -53,8 +59,16 @@ class Reference:
 
 
 def integral_curve(field: CompositeField, start: npt.ArrayLike, length: float,
-                   state: RolloutState | None = None) -> Curve:
+                   state: RolloutState | None = None,
+                   velocity: npt.ArrayLike | None = None) -> Curve:
     """Roll the discrete-time field (eq. 17) out from ``start`` for ``length`` m at most.
+
+    With the robot's ``velocity`` (m/s), the curve is continuous with its motion: the
+    first step is along the velocity, and each step turns towards the field's direction
+    by at most ``h LEAD_FRACTION a_max / |v|²`` (so the connector's curvature allows the
+    robot's speed, v²κ <= a_max) until the field's direction is within that turn; from
+    there on, and at once when a point comes within the middle of an obstacle's
+    sandwiched region (``(w_q + w_r)/2``), the curve is the field's (eq. 17).
 
     Stops at the end of the desired path, within half the reactive width of the goal
     (``REACHED``, the goal appended), after
@@ -70,13 +84,34 @@ def integral_curve(field: CompositeField, start: npt.ArrayLike, length: float,
     best, best_at, travelled = st.progress, 0.0, 0.0
     status = CurveStatus.LENGTH
     goal = field.path.goal
+    lead, turn = _connector(velocity, cfg)
+    release = 0.5 * (cfg.repulsive_offset + cfg.reactive_width)
     while travelled < length:
         chi, q = field.vector(xi, st)
         norm = float(np.hypot(*chi))
+        if st.direction is not None and norm > 0.0 and float(chi @ st.direction) < 0.0 \
+                and field.reverse_at_sink(xi, st):
+            chi, q = field.vector(xi, st)      # the curve turned back: a sink (field.py)
+            norm = float(np.hypot(*chi))
         if norm >= cfg.deadlock_epsilon or st.direction is None:
             direction = chi / norm if norm > 0.0 else -np.array([-q.grad[1], q.grad[0]])
         else:
             direction = st.direction
+        if lead is not None:
+            # The connector's step, then its turn towards the field for the next one.
+            near = field.obstacles.near(xi, release)
+            if near.size and float(field.obstacles.signed(xi, near)[0].min()) < release:
+                lead = None
+            else:
+                angle = math.atan2(lead[0] * direction[1] - lead[1] * direction[0],
+                                   float(lead @ direction))
+                if abs(angle) <= turn and len(pts) > 1:
+                    lead = None          # aligned: the field's from here on
+                else:
+                    a = math.copysign(min(turn, abs(angle)), angle)
+                    c, s = math.cos(a), math.sin(a)
+                    direction, lead = lead, np.array([c * lead[0] - s * lead[1],
+                                                      s * lead[0] + c * lead[1]])
         st.direction = direction
         st.progress = max(q.s, st.progress - field.WINDOW_BACK / 2.0)
         to_goal = float(np.hypot(*(xi - goal)))
@@ -97,6 +132,19 @@ def integral_curve(field: CompositeField, start: npt.ArrayLike, length: float,
             status = CurveStatus.STALLED
             break
     return Curve(np.array(pts), np.array(prog), status)
+
+
+def _connector(velocity: npt.ArrayLike | None, cfg: GuidanceConfig
+               ) -> tuple[np.ndarray | None, float]:
+    """The connector's start direction (None: at rest) and largest turn per step, rad."""
+    if velocity is None:
+        return None, math.pi
+    v = np.asarray(velocity, dtype=float).reshape(2)
+    speed = float(np.hypot(*v))
+    if speed <= 1e-9:
+        return None, math.pi
+    turn = cfg.step * LEAD_FRACTION * cfg.a_max / speed ** 2
+    return (v / speed, turn) if turn < math.pi else (None, math.pi)
 
 
 def menger_curvature(points: np.ndarray) -> np.ndarray:

@@ -94,6 +94,7 @@ class RolloutState:
     circulation: dict[int, float] = field(default_factory=dict)   # s_i, fixed when met
     entered: set[int] = field(default_factory=set)          # virtual obstacles handed over
     released: set[int] = field(default_factory=set)         # ... and then switched off
+    reversed: set[int] = field(default_factory=set)         # s_i flipped at a sink (once)
 
 
 class CompositeField:
@@ -192,6 +193,29 @@ class CompositeField:
             total += b_r @ chi_r
             weight_p *= float(np.prod(1.0 - b_r))
         return total + weight_p * chi_p, q
+
+    def reverse_at_sink(self, xi: np.ndarray, state: RolloutState) -> bool:
+        """Flip ``s_i`` of the obstacles whose field the curve is in; True if any was.
+
+        Called when the discrete curve turns back on itself (its step reverses the last
+        one): between the two points the composite field has a singular point, where the
+        circulation of an obstacle opposes the path field. When it is a sink (the field
+        points back at it from both sides, which the eps rule of eq. 17 cannot pass), the
+        curve would shuttle there for ever. Each obstacle whose reactive region holds the
+        curve, whose sense was chosen along this rollout (not preset for an occluding
+        obstacle) and not flipped yet, is given the other sense, once per rollout.
+        """
+        idx = self.obstacles.near(xi, self.config.reactive_width)
+        if not idx.size:
+            return False
+        d, _ = self.obstacles.signed(xi, idx)
+        flipped = False
+        for i in (int(k) for k in idx[d < self.config.reactive_width]):
+            if i in state.circulation and i not in self.preset and i not in state.reversed:
+                state.circulation[i] = -state.circulation[i]
+                state.reversed.add(i)
+                flipped = True
+        return flipped
 
     def _circulation(self, i: int, grad: np.ndarray, chi_p: np.ndarray,
                      state: RolloutState) -> float:

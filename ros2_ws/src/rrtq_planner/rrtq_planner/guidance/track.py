@@ -6,7 +6,10 @@ the curve point nearest the robot (searched forward only, so the reference never
 backwards), re-profiled from the robot's own speed, sampled every ``dt`` over the
 horizon. When the robot has left the curve by more than half the reactive width, the
 curve is rolled out again from where the robot is: the field is defined everywhere, so
-the new curve joins the path from there.
+the new curve joins the path from there. A curve rolled out from a moving robot starts
+along its velocity and turns onto the field no harder than its speed allows (the
+connector of :func:`integral_curve`), so a rebuilt track is continuous in heading and
+speed with the robot's motion.
 """
 
 from __future__ import annotations
@@ -49,10 +52,14 @@ class GuidanceTrack:
         self._index = 0
         self.rollouts = 0
 
-    def roll(self, start: npt.ArrayLike) -> Curve:
-        """The integral curve from ``start`` to the goal (or until it stalls)."""
+    def roll(self, start: npt.ArrayLike, velocity: npt.ArrayLike | None = None) -> Curve:
+        """The integral curve from ``start`` to the goal (or until it stalls).
+
+        With the robot's ``velocity``, it leaves ``start`` along it and turns onto the
+        field within the acceleration limit (:func:`integral_curve`'s connector).
+        """
         budget = 3.0 * self.path.length + 50.0
-        self.curve = integral_curve(self.field, start, budget)
+        self.curve = integral_curve(self.field, start, budget, velocity=velocity)
         self._index = 0
         self.rollouts += 1
         return self.curve
@@ -64,7 +71,7 @@ class GuidanceTrack:
         p = np.asarray(position, dtype=float).reshape(2)
         v = np.asarray(velocity, dtype=float).reshape(2)
         if self.curve is None:
-            self.roll(p)
+            self.roll(p, v)
         assert self.curve is not None
         pts = self.curve.points
         lo = max(self._index - 10, 0)
@@ -72,7 +79,7 @@ class GuidanceTrack:
         dist = np.hypot(*(pts[lo:hi] - p).T)
         k = lo + int(np.argmin(dist))
         if float(dist[k - lo]) > 0.5 * cfg.reactive_width:
-            pts = self.roll(p).points
+            pts = self.roll(p, v).points
             k = 0
         self._index = k
         reach = cfg.v_max * cfg.horizon + cfg.v_max ** 2 / cfg.a_max + 2.0 * cfg.step
