@@ -185,18 +185,22 @@ class LearningDriver(Driver):
             if self.legs.leg is not None and np.allclose(self.legs.leg.target[:2], x[:2]):
                 return
             points = x[None, :2].copy()
+        before = None if self.legs.leg is None else self.legs.leg.target.copy()
         if self.legs.follow_plan(points, x, t):
             assert self.legs.leg is not None
-            self.controller.start_leg(self.legs.x_bar(x), t, completed=False)
+            self.controller.start_leg(self.legs.x_bar(x), t, completed=False,
+                                      moved=self._moved(before))
 
     def step(self, t: float, x: ArrayLike, d_applied: ArrayLike | None = None) -> ControlOutput:
         x = np.asarray(x, dtype=float)
+        before = None if self.legs.leg is None else self.legs.leg.target.copy()
         event = self.legs.update(x, t)
         c = self.controller
         if event is LegEvent.NO_PLAN:
             return self._output(np.zeros(self.m), x, event.value, t)
         if event is LegEvent.NEW_LEG:
-            c.start_leg(self.legs.x_bar(x), t, completed=self.legs.completed)
+            c.start_leg(self.legs.x_bar(x), t, completed=self.legs.completed,
+                        moved=self._moved(before))
         elif (event is LegEvent.GOAL_REACHED and self.legs.leg is not None
               and self.legs.leg.d0 > self.legs.skip_radius):
             # a leg to where the robot already is (the hold before the first path, or
@@ -205,6 +209,11 @@ class LearningDriver(Driver):
         u = c.step(t, self.legs.x_bar(x),
                    None if d_applied is None else np.asarray(d_applied, dtype=float))
         return self._output(u, x, event.value, t)
+
+    def _moved(self, before: Array | None) -> Array | None:
+        """How far the leg's target moved from ``before`` (None: there was no leg)."""
+        assert self.legs.leg is not None
+        return None if before is None else self.legs.leg.target - before
 
     def _output(self, u: Array, x: Array, event: str, t: float) -> ControlOutput:
         leg, c = self.legs.leg, self.controller

@@ -94,8 +94,12 @@ class DivergenceWatch:
     and the motion it started with, in one horizon T. The reference (D0, L, v0) is the
     start of the last leg that began afresh (the first, one after a completed leg or
     after a revert): legs that a new plan or the horizon restarts keep it, so a robot
-    that runs away cannot escape the watch by the legs it starts on its way. It trips at
-    most once per leg.
+    that runs away cannot escape the watch by the legs it starts on its way. Such a leg
+    has a new target, though, and its x̄ says how far the robot is from that one: when the
+    caller says how far the target moved, D is measured from the reference leg's own
+    target (x̄ + ``offset``, ``offset`` the sum of the moves), so a plan that sends the
+    robot to a farther waypoint is not taken for a robot running away. It trips at most
+    once per leg.
     """
 
     distance: float
@@ -105,16 +109,25 @@ class DivergenceWatch:
     d0: float = 0.0
     speed_bound: float = math.inf
     tripped: bool = False
+    offset: Array | None = None
+    """The reference leg's target seen from the current one's (state units), or None."""
 
-    def start(self, x0: Array, renew: bool = True) -> None:
+    def start(self, x0: Array, renew: bool = True, moved: Array | None = None) -> None:
         """A new leg from x̄0; ``renew`` makes it the reference.
 
-        A reference leg that started on its target (D0 = 0: the robot at rest before the
+        ``moved``: how far the target moved from the previous leg's (state units; None
+        when the caller does not know, then D is the distance to the current target). A
+        reference leg that started on its target (D0 = 0: the robot at rest before the
         first plan) is no reference; the next leg replaces it in any case.
         """
         self.tripped = False
         if not renew and self.d0 > 1e-9:
+            if moved is None or self.offset is None:
+                self.offset = None
+            else:
+                self.offset = self.offset + np.asarray(moved, dtype=float)
             return
+        self.offset = np.zeros_like(np.asarray(x0, dtype=float))
         self.d0 = float(np.linalg.norm(x0))
         length = float(np.linalg.norm(x0[:2]))
         v0 = float(np.linalg.norm(x0[2:]))
@@ -124,7 +137,7 @@ class DivergenceWatch:
         """'' while the leg is fine; the criterion it broke, the first time it breaks one."""
         if self.tripped:
             return ''
-        d = float(np.linalg.norm(x))
+        d = float(np.linalg.norm(x if self.offset is None else x + self.offset))
         bound = self.distance * self.d0 + self.floor
         if d > bound:
             self.tripped = True

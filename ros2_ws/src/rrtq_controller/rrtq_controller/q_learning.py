@@ -106,14 +106,17 @@ class QLearningController(WeightReadout):
         self.warnings: list[str] = gain_warnings(self)
 
     # ----------------------------------------------------------------- legs
-    def start_leg(self, x0_bar: Array, t: float, completed: bool | None = None) -> None:
+    def start_leg(self, x0_bar: Array, t: float, completed: bool | None = None,
+                  moved: Array | None = None) -> None:
         """Begin a new finite-horizon problem at time t (s) from x̄0 (RRT-QX Alg. 1, l. 6).
 
         The learned weights are kept: the Q-function depends on x̄, u and τ only.
         ``completed`` says whether the previous leg ended in its window D <= ρ D0 (then
         its policy becomes the one a diverging leg reverts to); None infers it from the
         leg's duration (it ended before its horizon), which is right where legs end only
-        at their window or horizon.
+        at their window or horizon. ``moved``: how far the target moved from the previous
+        leg's, x_r(new) - x_r(old) (state units), when the caller knows (the divergence
+        watch measures from the reference leg's target, :class:`guard.DivergenceWatch`).
         """
         renew = True   # a fresh divergence reference: first leg, completed leg, a revert
         if self.leg_index >= 0:
@@ -131,7 +134,8 @@ class QLearningController(WeightReadout):
         self.leg_index += 1
         self._t0 = float(t)
         self._prev = None
-        self._watch.start(np.asarray(x0_bar, dtype=float), renew)
+        self._watch.start(np.asarray(x0_bar, dtype=float), renew,
+                          None if moved is None else np.asarray(moved, dtype=float))
         self._held = False
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
 

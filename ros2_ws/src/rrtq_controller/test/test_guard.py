@@ -189,3 +189,23 @@ def test_a_proposal_is_held_where_no_sample_covers_its_times_to_go():
         assert np.linalg.norm(ctrl.gain(t, H) - ctrl.gain(t, W)) <= 0.1 * np.linalg.norm(ctrl.gain(t, W))
     assert min(ctrl.gain(t, H)[0, 0] for t in taus) > 0.0
     assert held_below(ctrl.time_basis.batch, W, 0.4, T) is W   # covered to 0.4 s: unchanged
+
+
+def test_a_new_plan_to_a_farther_waypoint_is_not_a_robot_running_away():
+    """Seen in the defaults-only bench: 1.1 m from its target, the robot gets a new plan
+    whose first waypoint is 4.4 m away (the route changed around an obstacle); measured
+    from the new target that is D > 3 D0 + 1 = 4.3 and the watch tripped. Told how far
+    the target moved, it measures from the reference leg's target: no trip while the
+    robot stays put, and a trip still when it then runs away from where it was sent."""
+    watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0)
+    watch.start(np.array([-1.1, 0.0, 0.0, 0.0]))               # target at (1.1, 0), robot at 0
+    moved = np.array([-3.7, 3.6, 0.0, 0.0])                    # the new waypoint: (-2.6, 3.6)
+    x_new = np.array([2.6, -3.6, 0.0, 0.0])                    # the robot, seen from it
+    assert np.linalg.norm(x_new) > 3.0 * 1.1 + 1.0
+    watch.start(x_new, renew=False, moved=moved)
+    assert watch.check(x_new) == ''
+    assert 'D =' in watch.check(x_new + np.array([-4.5, 0.0, 0.3, 0.0]))    # 5.6 m from (1.1, 0)
+    unknown = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0)
+    unknown.start(np.array([-1.1, 0.0, 0.0, 0.0]))
+    unknown.start(x_new, renew=False)                          # not told: the old rule
+    assert 'D =' in unknown.check(x_new)
