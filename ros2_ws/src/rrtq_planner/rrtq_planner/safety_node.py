@@ -50,7 +50,8 @@ class SafetyNode(Node):
         self.policy = make_policy(
             margins.margin, region=world.bounds, dt=run.dt, confidence=margins.confidence,
             window=margins.window, initial_margin=margins.initial_margin,
-            calibration=calibration, frame=margins.frame, n=self.dims.n, m=self.dims.m)
+            calibration=calibration, frame=margins.frame, n=self.dims.n, m=self.dims.m,
+            prior_bound=margins.prior_bound, robot_radius=world.robot_radius)
         self.needs_gain = margins.margin is MarginMode.LEARNED_BOUND
         self.monitor = SafetyMonitor(config, TrueObstacles.for_scenario(world))
         self.aug_pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_AUGMENTED,
@@ -80,7 +81,8 @@ class SafetyNode(Node):
                 f'({margin.mode}; violation {margin.violations}): the margin is raised for '
                 'the rest of the leg')
         done = self.monitor.step(step.stamp_ns, x[:2], conv.changed_obstacles(detected),
-                                 leg_of(state), (margin.d_rob, margin.d_rob_max, margin.margin))
+                                 leg_of(state), (margin.d_rob, margin.d_rob_max, margin.margin),
+                                 margin.local)
         if done.augmented is not None:
             self.aug_pub.publish(conv.obstacle_array_msg(step.stamp_ns, done.augmented,
                                                          done.margin))

@@ -22,8 +22,10 @@ import dataclasses
 import enum
 import math
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
+import shapely
 from scipy.stats import norm
 
 from rrtq_common.settings import check, setting
@@ -31,7 +33,7 @@ from rrtq_common.settings import check, setting
 from .bank import BoundBank
 from .policy import LegTracker, MarginMode, MarginSample, MarginStatus
 from .regression import FieldFit, FieldStatistics, RBFFeatures, fit_field
-from .tube import nominal_deviation, random_deviation, tube_gains, tube_margin
+from .tube import leg_spread, leg_tube, nominal_deviation, nominal_path, position_covariance
 
 __all__ = ['ModelFrame', 'LearnedBoundConfig', 'LearnedBoundPolicy']
 
@@ -102,6 +104,8 @@ class LearnedBoundConfig:
                                'nominal part: how the robot enters its legs now, not during '
                                'a transient')
     directions: int = setting(16, doc="directions of a leg's normal the tube is maximised over")
+    robot_radius: float = setting(0.5, unit='m', low=0.0, doc='an obstacle within this of the '
+                                  "current leg's corridor is grown by that leg's margin")
 
     def __post_init__(self) -> None:
         check(self, finite=True)
@@ -184,7 +188,25 @@ class LearnedBoundPolicy:
         """Worst-case deviation per unit bound over a leg (:func:`.tube.tube_gains`)."""
         self.spread: np.ndarray | None = None
         """Standard deviation of the random deviation over a leg (:func:`.tube.random_deviation`)."""
+        self.cell_bound: np.ndarray | None = None
+        """Per cell, the upper band in units of R (max over components) of the last fit; where
+        the data do not support the band, at most 1 (the prior bound)."""
+        self.corridor = np.zeros(len(self.cells), dtype=bool)
+        """Cells the current leg's level was last taken over (its corridor, §5)."""
+        self.path: np.ndarray | None = None
+        """The current leg's undisturbed positions (N, 2) under the model."""
+        self.path_deviation = np.zeros(0)
+        self.along = np.zeros(0)
+        """Tube across the current leg's line per unit level (N,)."""
+        self.along_spread = np.zeros(0)
+        self.observed = np.zeros(len(self.cells))
+        """Per cell, the largest residual (net of the noise allowance, in units of R) taken
+        within ``reach`` of it: a floor of the cell's bound (up at once on evidence)."""
+        self._cell_points = shapely.points(self.cells)
+        self._local: dict[tuple[str, bytes], tuple[float, np.ndarray]] = {}
         self.nominal = 0.0
+        self.recent_nominal = 0.0
+        """Largest nominal deviation of the recent legs' starts under the current loop."""
         self.model_margin = math.inf
         self.leg_margin = self._margin()
         self.last_fit = -math.inf
@@ -217,20 +239,24 @@ class LearnedBoundPolicy:
         if self.legs.new_leg:
             self._fit(sample.t, state)
             self._new_tube(sample)
+            self._follow_band()
+            self.model_margin = self._model_margin()
             self.leg_margin = self._margin()
             self.flagged = False
         elif sample.t - self.last_fit >= c.evaluation_period - 1e-9 and self.current is not None:
             self._fit(sample.t, state)
+            self._follow_band()
             self.model_margin = self._model_margin()
         elif raised:
             self.model_margin = self._model_margin()
         t = self.legs
         violation = t.leg is not None and t.leg_max > self.leg_margin and not self.flagged
         self.flagged |= violation
+        local = None if math.isinf(self.model_margin) else self.obstacle_margin
         return MarginStatus(self.mode, max(self._margin(), t.leg_max), self.leg_margin,
                             self.bank.level * c.prior_bound, c.confidence, self.samples,
                             self.misses + self.flagged, t.d_rob, t.d_rob_max, violation,
-                            self.bank.violations, t.leg_max, t.count)
+                            self.bank.violations, t.leg_max, t.count, local)
 
     # ------------------------------------------------------------------ learning
     def _learn(self, state: np.ndarray, sample: MarginSample) -> bool:
@@ -252,19 +278,25 @@ class LearnedBoundPolicy:
         z = np.concatenate([prev - xr, np.asarray(sample.applied, dtype=float)])
         y = state - xr
         self.current.stats.add(self.features(prev[:2]), y, z)
-        self._visit(prev[:2])
+        near = self._visit(prev[:2])
         if self.theta is None:
             return False
         excess = np.abs(y - self.theta @ z) - self.config.noise_allowance * self.sigma
-        return self.bank.observe(float((excess / self._prior_residual).max()))
+        level = float((excess / self._prior_residual).max())
+        if level > 0.0:
+            self.observed[near] = np.maximum(self.observed[near], level)
+        return self.bank.observe(level)
 
-    def _visit(self, p: np.ndarray) -> None:
+    def _visit(self, p: np.ndarray) -> np.ndarray:
+        """Mark the cells within ``reach`` of p visited; returns their indices."""
         (x0, _), (y0, _) = self.config.region
         ij = np.rint([(p[0] - x0) / self.config.cell, (p[1] - y0) / self.config.cell]).astype(int)
         idx = ij[None] + self._stencil
         ok = (idx[:, 0] >= 0) & (idx[:, 0] < self._nx) & (idx[:, 1] >= 0) & (idx[:, 1] < self._ny)
         assert self.current is not None
-        self.current.visited[idx[ok, 0] * self._ny + idx[ok, 1]] = True
+        flat = idx[ok, 0] * self._ny + idx[ok, 1]
+        self.current.visited[flat] = True
+        return flat
 
     def _fit(self, t: float, state: np.ndarray) -> None:
         """Fit model and field on the window; the bank follows the band near the robot."""
@@ -290,11 +322,71 @@ class LearnedBoundPolicy:
         supported = math.sqrt(c.ridge) * fit.spread(self._cell_phi[idx]) <= c.support
         self.region = np.zeros_like(region)
         self.region[idx[supported]] = True
-        if not self.region.any():
+        # The upper band on every cell, in units of the prior bound (|d_i| <= level R_i for
+        # every component). Where the data have not cut the band to `support` of the prior's,
+        # the prior bound (Jha's assumption 3.1) caps it: the band there is the prior's
+        # uncertainty, and assuming the field no stronger than R is what the start assumed.
+        mean, half = fit.band(self._cell_phi)
+        upper = ((np.abs(mean) + half) / self._prior_residual).max(axis=1)
+        firm = math.sqrt(c.ridge) * fit.spread(self._cell_phi) <= c.support
+        self.cell_bound = np.maximum(np.where(firm, upper, np.minimum(upper, 1.0)), self.observed)
+
+    def _follow_band(self) -> None:
+        """The bank follows the band: over the current leg's corridor, else near the robot.
+
+        The corridor (docs/margins.md §5.1) is where the robot can be on this leg if the
+        field on it is at most the level ℓ: the discs of the worst-direction tube at ℓ about
+        the leg's undisturbed path. A level is consistent when the band's supremum over its
+        own corridor is at most ℓ: then, by induction over the leg's steps, the field the
+        robot meets is at most ℓ and the robot stays in the corridor. The level is the least
+        consistent rung, found from below: from the band's supremum along the path itself,
+        raised to the supremum over the corridor of the level before until it stops rising.
+        """
+        if self.cell_bound is None:
             return
-        mean, half = fit.band(self._cell_phi[self.region])
-        # The level is in units of the prior bound: |d_i| <= level R_i for every component.
-        self.bank.evaluate(float(((np.abs(mean) + half) / self._prior_residual).max()))
+        bound = self.cell_bound
+        if self.path is None or self.tube is None or self.spread is None:
+            if self.region.any():
+                self.bank.evaluate(float(bound[self.region].max()))
+            return
+        z = self._z()
+        pad = self.config.cell * math.sqrt(0.5)   # a cell's square within the disc
+        path, tube, spread = self.path, self.tube, self.spread
+        level, inside = self._least_level(
+            bound, lambda lv: self._within(path, lv * tube + z * spread + pad))
+        self.corridor = inside
+        self.bank.evaluate(level)
+        self._local.clear()
+
+    def _least_level(self, bound: np.ndarray,
+                     region: Callable[[float], np.ndarray]) -> tuple[float, np.ndarray]:
+        """The least rung ℓ with ceil(sup of ``bound`` over ``region(ℓ)``) <= ℓ, and its region.
+
+        ``region`` grows with ℓ, so iterating ℓ ← ceil(sup over region(ℓ)) from ℓ = 0 rises to
+        the least such rung (or to inf).
+        """
+        level = 0.0
+        inside = region(level)
+        for _ in range(200):
+            higher = self.bank.ceil(float(bound[inside].max())) if inside.any() else 0.0
+            if higher <= level or math.isinf(higher):
+                level = max(level, higher)
+                break
+            level = higher
+            inside = region(level)
+        return level, inside
+
+    def _within(self, path: np.ndarray, radius: np.ndarray) -> np.ndarray:
+        """Cells within ``radius[k]`` of ``path[k]`` for some k."""
+        lo = path.min(axis=0) - radius.max()
+        hi = path.max(axis=0) + radius.max()
+        box = np.flatnonzero(np.all((self.cells >= lo) & (self.cells <= hi), axis=1))
+        out = np.zeros(len(self.cells), dtype=bool)
+        if len(box) == 0:
+            return out
+        d = np.linalg.norm(self.cells[box, None, :] - path[None, :, :], axis=2)
+        out[box] = (d <= radius[None, :]).any(axis=1)
+        return out
 
     def _leg_lengths(self) -> list[float]:
         return [float(np.linalg.norm(s[:2] - g)) for _, s, g in
@@ -302,8 +394,15 @@ class LearnedBoundPolicy:
 
     # ------------------------------------------------------------------ margin
     def _new_tube(self, sample: MarginSample) -> None:
-        """Tube and nominal deviations of the closed loop the controller runs now."""
-        if sample.gain is None or sample.horizon <= 0.0 or self.theta is None:
+        """The current leg under the closed loop the controller runs now (docs/margins.md §5).
+
+        Its undisturbed path from its start state, and per step the tube (per unit level) and
+        the random part's standard deviation, across the leg's line and in the worst direction
+        (the latter for the corridor the field is bounded over).
+        """
+        self.path = None
+        if sample.gain is None or sample.horizon <= 0.0 or self.theta is None \
+                or sample.leg is None or not self.legs.started:
             self.tube = None
             return
         # A leg lasts at most the horizon; the tube runs as long as the window's longest leg
@@ -318,23 +417,84 @@ class LearnedBoundPolicy:
         offset = np.zeros((self.n, 2))
         if self.config.frame is ModelFrame.WORLD_ORIGIN:
             offset = (phi - np.eye(self.n))[:, :2]
-        self.tube = tube_gains(phi, gamma, gains, self._prior_residual, self.config.directions)
+        # D_rob is measured from the line through the leg's start and target (leg.start, as
+        # the controller reports it); the replay starts from the full state at the leg start.
+        start = np.asarray(self.legs.started[-1][1], dtype=float)
+        origin = np.asarray(sample.leg.start, dtype=float)[:2]
+        target = np.asarray(sample.leg.target, dtype=float)[:2]
+        line = target - origin
+        length = float(np.linalg.norm(line))
+        normal = np.array([-line[1], line[0]]) / length if length > 1e-12 else None
+        self.tube, along = leg_tube(phi, gamma, gains, self._prior_residual, normal,
+                                    self.config.directions)
         # The probing of the last finished leg: it decays from leg to leg.
         source = self.data[-1] if self.data else self.current
         std, corr = source.probing_statistics(self.m) if source is not None else (0.0, 0.0)
-        self.spread = random_deviation(phi, gamma, gains, self.sigma, std, corr)
+        self.spread, along_spread = leg_spread(
+            position_covariance(phi, gamma, gains, self.sigma, std, corr), normal)
+        self.path, self.path_deviation = nominal_path(phi, gamma, offset, gains, start, target,
+                                                      origin)
+        # A zero-length leg has no line: its deviation is the distance from the target, which
+        # the worst direction bounds.
+        self.along = along if normal is not None else self.tube
+        self.along_spread = along_spread if normal is not None else self.spread
+        self.nominal = float(self.path_deviation.max())
         starts = self.legs.started[-self.config.recent_legs:]
-        self.nominal = float(nominal_deviation(
+        self.recent_nominal = float(nominal_deviation(
             phi, gamma, offset, gains, np.array([s for _, s, _ in starts]),
             np.array([g for _, _, g in starts])).max())
-        self.model_margin = self._model_margin()
+        self._local.clear()
+
+    def _z(self) -> float:
+        # The random part must hold over the whole leg: a union bound over its steps.
+        steps = len(self.tube) if self.tube is not None else 1
+        return float(norm.ppf(1.0 - 0.5 * self._delta / steps))
 
     def _model_margin(self) -> float:
-        if self.tube is None or self.spread is None or math.isinf(self.bank.level):
+        if self.path is None or math.isinf(self.bank.level):
             return math.inf
-        # The random part must hold over the whole leg: a union bound over its steps.
-        z = float(norm.ppf(1.0 - 0.5 * self._delta / len(self.tube)))
-        return self.nominal + tube_margin(self.tube, self.bank.level, self.spread, z)
+        return float((self.path_deviation + self.bank.level * self.along
+                      + self._z() * self.along_spread).max())
+
+    def obstacle_margin(self, oid: str, polygon: np.ndarray) -> float:
+        """The margin (m) of one obstacle by where it is (docs/margins.md §5.1).
+
+        Any leg that can bring the robot near the obstacle runs where the band is taken here:
+        within the window's longest leg plus twice its tube of the obstacle. The margin of such
+        a leg, its direction and start unknown, is the recent legs' nominal deviation plus the
+        worst-direction tube and spread at the level of that neighbourhood (lowered as in
+        :meth:`_follow_band` until it no longer falls). An obstacle the current leg's corridor
+        comes within the robot radius of is grown by at least the current leg's margin.
+        """
+        key = (oid, np.ascontiguousarray(polygon, dtype=float).tobytes())
+        if key not in self._local:
+            shape = shapely.Polygon(polygon)
+            gaps = (np.asarray(shapely.distance(shape, shapely.points(self.path)), dtype=float)
+                    if self.path is not None else np.zeros(0))
+            self._local[key] = (self._neighbourhood_margin(shape), gaps)
+        generic, gaps = self._local[key]
+        now = max(self._margin(), self.legs.leg_max)
+        if self.tube is not None and self.spread is not None and len(gaps):
+            radius = np.maximum(self.bank.level * self.tube + self._z() * self.spread, now)
+            if np.any(gaps <= radius + self.config.robot_radius):
+                return max(generic, now)
+        return generic
+
+    def _neighbourhood_margin(self, shape: shapely.Polygon) -> float:
+        if self.cell_bound is None or self.tube is None or self.spread is None:
+            return max(self._margin(), self.legs.leg_max)
+        z = self._z()
+        dist = np.asarray(shapely.distance(shape, self._cell_points), dtype=float)
+        longest = max(self._leg_lengths() + [self.config.feature_spacing])
+        pad = self.config.cell * math.sqrt(0.5)
+        tube, spread = self.tube, self.spread
+        level, _ = self._least_level(
+            self.cell_bound,
+            lambda lv: np.asarray(dist <= longest + 2.0 * float((lv * tube + z * spread).max())
+                                  + pad))
+        if math.isinf(level):
+            return max(self._margin(), self.legs.leg_max)
+        return self.recent_nominal + float((level * tube + z * spread).max())
 
     def _fallback(self) -> float:
         return self.legs.d_rob_max if self.initial_margin is None else self.initial_margin
