@@ -33,9 +33,10 @@ from rrtq_common.settings import check, setting
 from .bank import BoundBank
 from .policy import LegTracker, MarginMode, MarginSample, MarginStatus
 from .regression import FieldFit, FieldStatistics, RBFFeatures, fit_field
-from .tube import leg_spread, leg_tube, nominal_deviation, nominal_path, position_covariance
+from .tube import (leg_spread, leg_tube_terms, nominal_deviation, nominal_path,
+                   position_covariance)
 
-__all__ = ['ModelFrame', 'LearnedBoundConfig', 'LearnedBoundPolicy']
+__all__ = ['ModelFrame', 'LearnedBoundConfig', 'LearnedBoundPolicy', 'FieldEstimate']
 
 Bounds = tuple[tuple[float, float], tuple[float, float]]
 
@@ -109,6 +110,31 @@ class LearnedBoundConfig:
 
     def __post_init__(self) -> None:
         check(self, finite=True)
+
+
+@dataclasses.dataclass(frozen=True)
+class FieldEstimate:
+    """The last fit's field and band on the policy's cells (``/safety/disturbance_estimate``).
+
+    Accelerations (m/s²): the residual's velocity rows divided by dt. Cell k is at
+    ``cells[k]``, on a grid of ``shape`` (nx, ny) from ``origin`` at ``spacing``, k = i ny + j.
+    """
+
+    t: float
+    """s, when the fit was made."""
+    origin: tuple[float, float]
+    spacing: float
+    shape: tuple[int, int]
+    mean: np.ndarray
+    """(cells, 2): the fitted field."""
+    band: np.ndarray
+    """(cells, 2): half-width of the simultaneous band."""
+    supported: np.ndarray
+    """(cells,): visited within reach, band cut to at most ``support`` of the prior's."""
+    bound: float
+    """m/s², the bank's level as an acceleration."""
+    confidence: float
+    samples: int
 
 
 class _LegData:
@@ -189,8 +215,8 @@ class LearnedBoundPolicy:
         self.spread: np.ndarray | None = None
         """Standard deviation of the random deviation over a leg (:func:`.tube.random_deviation`)."""
         self.cell_bound: np.ndarray | None = None
-        """Per cell, the upper band in units of R (max over components) of the last fit; where
-        the data do not support the band, at most 1 (the prior bound)."""
+        """Per cell, the bound of the field in units of R (max over components) after the last
+        fit: min(upper band, 1), or max(upper band, residual) where a residual refuted R."""
         self.corridor = np.zeros(len(self.cells), dtype=bool)
         """Cells the current leg's level was last taken over (its corridor, §5)."""
         self.path: np.ndarray | None = None
@@ -199,9 +225,21 @@ class LearnedBoundPolicy:
         self.along = np.zeros(0)
         """Tube across the current leg's line per unit level (N,)."""
         self.along_spread = np.zeros(0)
+        self.terms = np.zeros((0, 0, config.directions))
+        """The tube's terms [k, j, direction] (:func:`.tube.leg_tube_terms`)."""
+        self.along_terms: np.ndarray | None = None
+        self.points = np.zeros((0, 2))
+        """The undisturbed positions at steps 0..N of the current leg (its start first)."""
+        self.levels = np.zeros(0)
+        """The field's bound (units of R) the robot can meet at each step of the leg."""
+        self.radius = np.zeros(0)
+        """m, how far from its undisturbed position the robot can be at each step."""
+        self.across = np.zeros(0)
+        """m, the bound on the deviation from the leg's line at steps 1..N."""
         self.observed = np.zeros(len(self.cells))
         """Per cell, the largest residual (net of the noise allowance, in units of R) taken
-        within ``reach`` of it: a floor of the cell's bound (up at once on evidence)."""
+        within ``reach`` of it: above 1 it refutes the prior bound there (up at once on
+        evidence) and is a floor of the cell's bound."""
         self._cell_points = shapely.points(self.cells)
         self._local: dict[tuple[str, bytes], tuple[float, np.ndarray]] = {}
         self.nominal = 0.0
@@ -210,6 +248,9 @@ class LearnedBoundPolicy:
         self.model_margin = math.inf
         self.leg_margin = self._margin()
         self.last_fit = -math.inf
+        self.fits = 0
+        """Fits made so far (the node publishes an estimate when it changes)."""
+        self._cell_band: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self.flagged = False
         self.misses = 0
         self._delta = 1.0 - config.confidence
@@ -258,6 +299,17 @@ class LearnedBoundPolicy:
                             self.misses + self.flagged, t.d_rob, t.d_rob_max, violation,
                             self.bank.violations, t.leg_max, t.count, local)
 
+    def estimate(self) -> FieldEstimate | None:
+        """The last fit's field and band as accelerations on the cells; None before a fit."""
+        if self._cell_band is None:
+            return None
+        c = self.config
+        mean, half, supported = self._cell_band
+        (x0, _), (y0, _) = c.region
+        return FieldEstimate(self.last_fit, (x0, y0), c.cell, (self._nx, self._ny),
+                             mean[:, 2:4] / c.dt, half[:, 2:4] / c.dt, supported.copy(),
+                             self.bank.level * c.prior_bound, c.confidence, self.samples)
+
     # ------------------------------------------------------------------ learning
     def _learn(self, state: np.ndarray, sample: MarginSample) -> bool:
         """Account the pair (x̄_{k−1}, u_{k−1}) → x̄_k; True when its residual raised the bank.
@@ -285,7 +337,13 @@ class LearnedBoundPolicy:
         level = float((excess / self._prior_residual).max())
         if level > 0.0:
             self.observed[near] = np.maximum(self.observed[near], level)
-        return self.bank.observe(level)
+        raised = self.bank.observe(level)
+        if level > 1.0 and self.cell_bound is not None and bool((self.cell_bound[near] < level).any()):
+            # Up at once on evidence: the prior is refuted here; the leg's levels follow.
+            self.cell_bound[near] = np.maximum(self.cell_bound[near], level)
+            self._follow_band()
+            raised = True
+        return raised
 
     def _visit(self, p: np.ndarray) -> np.ndarray:
         """Mark the cells within ``reach`` of p visited; returns their indices."""
@@ -322,25 +380,32 @@ class LearnedBoundPolicy:
         supported = math.sqrt(c.ridge) * fit.spread(self._cell_phi[idx]) <= c.support
         self.region = np.zeros_like(region)
         self.region[idx[supported]] = True
-        # The upper band on every cell, in units of the prior bound (|d_i| <= level R_i for
-        # every component). Where the data have not cut the band to `support` of the prior's,
-        # the prior bound (Jha's assumption 3.1) caps it: the band there is the prior's
-        # uncertainty, and assuming the field no stronger than R is what the start assumed.
+        # The bound of every cell, in units of the prior bound (|d_i| <= level R_i for every
+        # component): the upper band, capped by the prior bound R (Jha's assumption 3.1: the
+        # minimum of two bounds, each valid under its assumption) -- except where a residual
+        # has exceeded R (net of the noise allowance) within `reach`: there the assumption is
+        # refuted and, as in Jha's Alg. 1, the bound is raised to the largest such residual
+        # (the band, which would certify it, is confounded with the model along a straight
+        # route: docs/margins.md §5.1).
         mean, half = fit.band(self._cell_phi)
         upper = ((np.abs(mean) + half) / self._prior_residual).max(axis=1)
         firm = math.sqrt(c.ridge) * fit.spread(self._cell_phi) <= c.support
-        self.cell_bound = np.maximum(np.where(firm, upper, np.minimum(upper, 1.0)), self.observed)
+        refuted = self.observed > 1.0
+        self.cell_bound = np.where(refuted, self.observed, np.minimum(upper, 1.0))
+        visited = np.logical_or.reduce([b.visited for b in blocks])
+        self._cell_band = (mean, half, firm & visited)
+        self.fits += 1
 
     def _follow_band(self) -> None:
-        """The bank follows the band: over the current leg's corridor, else near the robot.
+        """The field's bound step by step along the current leg, and the leg's tube with it.
 
-        The corridor (docs/margins.md §5.1) is where the robot can be on this leg if the
-        field on it is at most the level ℓ: the discs of the worst-direction tube at ℓ about
-        the leg's undisturbed path. A level is consistent when the band's supremum over its
-        own corridor is at most ℓ: then, by induction over the leg's steps, the field the
-        robot meets is at most ℓ and the robot stays in the corridor. The level is the least
-        consistent rung, found from below: from the band's supremum along the path itself,
-        raised to the supremum over the corridor of the level before until it stops rising.
+        docs/margins.md §5.1. At step 0 the robot is at the leg's start; if at each step j < k
+        it was within radius_j of its undisturbed position, the field it met there was at most
+        ℓ_j, the bound of the cells within radius_j (ceil to the bank's rungs), so at step k it
+        is within radius_k = max_c Σ_j ℓ_j terms[k, j, c] / cos(π/2D) + z spread_k of it: by
+        induction the levels and radii hold over the whole leg, and across its line the
+        deviation is at most nominal_k + Σ_j ℓ_j along[k, j] + z along_spread_k. Without a
+        leg (no model or gain yet) the bank follows the band over the region near the robot.
         """
         if self.cell_bound is None:
             return
@@ -349,13 +414,36 @@ class LearnedBoundPolicy:
             if self.region.any():
                 self.bank.evaluate(float(bound[self.region].max()))
             return
+        c = self.config
         z = self._z()
-        pad = self.config.cell * math.sqrt(0.5)   # a cell's square within the disc
-        path, tube, spread = self.path, self.tube, self.spread
-        level, inside = self._least_level(
-            bound, lambda lv: self._within(path, lv * tube + z * spread + pad))
+        pad = c.cell * math.sqrt(0.5)   # a cell's square within the disc
+        widen = 1.0 / math.cos(math.pi / (2 * c.directions))
+        N = len(self.tube)
+        levels = np.zeros(N + 1)
+        radius = np.full(N + 1, pad)
+        for k in range(N + 1):
+            d = np.hypot(*(self.cells - self.points[k]).T)
+            near = d <= radius[k]
+            levels[k] = self.bank.ceil(float(bound[near].max())) if near.any() else 0.0
+            if math.isinf(levels[k]):
+                levels[k:] = math.inf
+                break
+            if k < N:
+                radius[k + 1] = (widen * float((levels[:k + 1] @ self.terms[k, :k + 1]).max())
+                                 + z * float(self.spread[k]) + pad)
+        self.levels, self.radius = levels, radius
+        if np.isinf(levels).any():
+            self.across = np.full(N, math.inf)
+        else:
+            terms = (self.along_terms if self.along_terms is not None
+                     else self.terms.max(axis=2) * widen)
+            self.across = (self.path_deviation + np.einsum('kj,j->k', terms, levels[:N])
+                           + z * self.along_spread)
+        inside = np.zeros(len(self.cells), dtype=bool)
+        for k in range(0, N + 1, max(N // 50, 1)):
+            inside |= np.hypot(*(self.cells - self.points[k]).T) <= radius[k]
         self.corridor = inside
-        self.bank.evaluate(level)
+        self.bank.evaluate(float(levels.max()))
         self._local.clear()
 
     def _least_level(self, bound: np.ndarray,
@@ -375,18 +463,6 @@ class LearnedBoundPolicy:
             level = higher
             inside = region(level)
         return level, inside
-
-    def _within(self, path: np.ndarray, radius: np.ndarray) -> np.ndarray:
-        """Cells within ``radius[k]`` of ``path[k]`` for some k."""
-        lo = path.min(axis=0) - radius.max()
-        hi = path.max(axis=0) + radius.max()
-        box = np.flatnonzero(np.all((self.cells >= lo) & (self.cells <= hi), axis=1))
-        out = np.zeros(len(self.cells), dtype=bool)
-        if len(box) == 0:
-            return out
-        d = np.linalg.norm(self.cells[box, None, :] - path[None, :, :], axis=2)
-        out[box] = (d <= radius[None, :]).any(axis=1)
-        return out
 
     def _leg_lengths(self) -> list[float]:
         return [float(np.linalg.norm(s[:2] - g)) for _, s, g in
@@ -425,8 +501,11 @@ class LearnedBoundPolicy:
         line = target - origin
         length = float(np.linalg.norm(line))
         normal = np.array([-line[1], line[0]]) / length if length > 1e-12 else None
-        self.tube, along = leg_tube(phi, gamma, gains, self._prior_residual, normal,
-                                    self.config.directions)
+        self.terms, along_terms = leg_tube_terms(phi, gamma, gains, self._prior_residual,
+                                                 normal, self.config.directions)
+        self.tube = self.terms.sum(axis=1).max(axis=1) / math.cos(
+            math.pi / (2 * self.config.directions))
+        along = along_terms.sum(axis=1)
         # The probing of the last finished leg: it decays from leg to leg.
         source = self.data[-1] if self.data else self.current
         std, corr = source.probing_statistics(self.m) if source is not None else (0.0, 0.0)
@@ -436,8 +515,12 @@ class LearnedBoundPolicy:
                                                       origin)
         # A zero-length leg has no line: its deviation is the distance from the target, which
         # the worst direction bounds.
+        # A zero-length leg: across "its line" is any direction (the worst one's terms, the
+        # widening applied when they are summed).
+        self.along_terms = along_terms if normal is not None else None
         self.along = along if normal is not None else self.tube
         self.along_spread = along_spread if normal is not None else self.spread
+        self.points = np.vstack([start[:2], self.path])
         self.nominal = float(self.path_deviation.max())
         starts = self.legs.started[-self.config.recent_legs:]
         self.recent_nominal = float(nominal_deviation(
@@ -451,33 +534,31 @@ class LearnedBoundPolicy:
         return float(norm.ppf(1.0 - 0.5 * self._delta / steps))
 
     def _model_margin(self) -> float:
-        if self.path is None or math.isinf(self.bank.level):
+        if self.path is None or math.isinf(self.bank.level) or len(self.across) == 0:
             return math.inf
-        return float((self.path_deviation + self.bank.level * self.along
-                      + self._z() * self.along_spread).max())
+        return float(self.across.max())
 
     def obstacle_margin(self, oid: str, polygon: np.ndarray) -> float:
         """The margin (m) of one obstacle by where it is (docs/margins.md §5.1).
 
         Any leg that can bring the robot near the obstacle runs where the band is taken here:
-        within the window's longest leg plus twice its tube of the obstacle. The margin of such
-        a leg, its direction and start unknown, is the recent legs' nominal deviation plus the
-        worst-direction tube and spread at the level of that neighbourhood (lowered as in
-        :meth:`_follow_band` until it no longer falls). An obstacle the current leg's corridor
-        comes within the robot radius of is grown by at least the current leg's margin.
+        within the window's longest leg plus twice its tube of the obstacle. What the field
+        can add to such a leg, its direction unknown, is the worst-direction tube and spread
+        at the least consistent level of that neighbourhood (as in :meth:`_follow_band`). An
+        obstacle the current leg's corridor comes within the robot radius of is grown by at
+        least the current leg's margin (its nominal part included).
         """
         key = (oid, np.ascontiguousarray(polygon, dtype=float).tobytes())
         if key not in self._local:
             shape = shapely.Polygon(polygon)
-            gaps = (np.asarray(shapely.distance(shape, shapely.points(self.path)), dtype=float)
-                    if self.path is not None else np.zeros(0))
+            gaps = (np.asarray(shapely.distance(shape, shapely.points(self.points)), dtype=float)
+                    if self.path is not None and len(self.radius) == len(self.points)
+                    else np.zeros(0))
             self._local[key] = (self._neighbourhood_margin(shape), gaps)
         generic, gaps = self._local[key]
         now = max(self._margin(), self.legs.leg_max)
-        if self.tube is not None and self.spread is not None and len(gaps):
-            radius = np.maximum(self.bank.level * self.tube + self._z() * self.spread, now)
-            if np.any(gaps <= radius + self.config.robot_radius):
-                return max(generic, now)
+        if len(gaps) and np.any(gaps <= np.maximum(self.radius, now) + self.config.robot_radius):
+            return max(generic, now)
         return generic
 
     def _neighbourhood_margin(self, shape: shapely.Polygon) -> float:
@@ -494,7 +575,9 @@ class LearnedBoundPolicy:
                                   + pad))
         if math.isinf(level):
             return max(self._margin(), self.legs.leg_max)
-        return self.recent_nominal + float((level * tube + z * spread).max())
+        # No nominal part: how a future leg is entered (its start velocity against its line)
+        # is known when it starts, and then its own margin grows the obstacles near it.
+        return float((level * tube + z * spread).max())
 
     def _fallback(self) -> float:
         return self.legs.d_rob_max if self.initial_margin is None else self.initial_margin

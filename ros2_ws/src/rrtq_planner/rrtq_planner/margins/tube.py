@@ -29,7 +29,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ['closed_loop', 'tube_gains', 'leg_tube', 'position_covariance',
+__all__ = ['closed_loop', 'tube_gains', 'leg_tube', 'leg_tube_terms', 'position_covariance',
            'random_deviation', 'leg_spread',
            'nominal_deviation', 'nominal_path', 'tube_margin']
 
@@ -60,6 +60,37 @@ def _projected_sums(a: np.ndarray, s: np.ndarray, c: np.ndarray) -> np.ndarray:
         proj = c @ blocks[N - 1 - k:, :2, :]                            # cᵀPΨ, (k+1, D, n)
         out[k] = (np.abs(proj) @ s).sum(axis=0)
     return out
+
+
+def leg_tube_terms(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray,
+                   shape: npt.ArrayLike, normal: npt.ArrayLike | None,
+                   directions: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """The tube's terms step by step, for a level that changes along the leg.
+
+    Returns (worst (N, N, D), along (N, N)): entry [k, j] is Σ_i s_i |cᵀPΨ(k+1, j+1)e_i|,
+    the deviation at step k + 1 per unit level of the residual at step j (zero for j > k),
+    for each of the D directions of :func:`tube_gains` and for the unit vector ``normal``
+    (zeros when None). With a level ℓ_j per step, the deviation at step k + 1 is at most
+    max_c Σ_j ℓ_j worst[k, j, c] / cos(π/2D) in any direction, Σ_j ℓ_j along[k, j] across
+    the leg's line.
+    """
+    s = np.asarray(shape, dtype=float)
+    a = closed_loop(phi, gamma, gains)
+    N, n = a.shape[0], a.shape[1]
+    c = _directions(directions)
+    if normal is not None:
+        c = np.vstack([c, np.asarray(normal, dtype=float).reshape(1, 2)])
+    terms = np.zeros((N, N, len(c)))
+    blocks = np.empty((N, n, n))
+    blocks[N - 1] = np.eye(n)
+    for k in range(N):
+        if k:
+            blocks[N - 1 - k:N - 1] = a[k] @ blocks[N - k:]
+            blocks[N - 1] = np.eye(n)
+        proj = c @ blocks[N - 1 - k:, :2, :]                            # (k+1, D, n), j = 0..k
+        terms[k, :k + 1] = np.abs(proj) @ s
+    along = terms[:, :, directions] if normal is not None else np.zeros((N, N))
+    return terms[:, :, :directions], along
 
 
 def tube_gains(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray, shape: npt.ArrayLike,
