@@ -133,6 +133,8 @@ class SafetyStep:
     new_collision: bool
     """The collision happened at this step."""
     leg_index: int
+    local_margins: dict[str, float] = dataclasses.field(default_factory=dict)
+    """m, robot radius included: each obstacle's own margin when the policy gives one."""
 
 
 class SafetyMonitor:
@@ -279,7 +281,8 @@ class SafetyMonitor:
             augmented=augmented, augmented_stamp_ns=self._augmented_stamp, d_rob=self.d_rob,
             d_rob_max=self.d_rob_max, margin=self.margin, clearance=float(gap),
             nearest=nearest, collision=self.collided, new_collision=new_collision,
-            leg_index=leg.index if leg is not None and leg.d0 > 0.0 else 0)
+            leg_index=leg.index if leg is not None and leg.d0 > 0.0 else 0,
+            local_margins=dict(self._published_local))
 
 
 def clearance(position: npt.ArrayLike, polygons: PolygonSet | Sequence[np.ndarray],

@@ -99,7 +99,7 @@ class SafetyNode(Node):
                                  margin.local)
         if done.augmented is not None:
             self.aug_pub.publish(conv.obstacle_array_msg(step.stamp_ns, done.augmented,
-                                                         done.margin))
+                                                         done.margin, done.local_margins))
         if done.new_collision:
             self.get_logger().error(f'collision with {done.nearest} at t={step.stamp_ns * 1e-9:.2f}'
                                     f' s, ({x[0]:.2f}, {x[1]:.2f})')

@@ -154,8 +154,6 @@ def read_safety(r: Reader, raw: Any, base: str, plant: PlantConfig) -> MarginCon
         except ValueError as exc:
             raise r.error('safety.calibration', str(exc)) from None
         calibration = path
-    if data.get('prior_bound') is not None and mode is not MarginMode.LEARNED_BOUND:
-        raise r.error('safety.prior_bound', f'only for margin: learned_bound, not {mode}')
     values = {name: r.setting(data, name, MarginConfig, key)
               for name in ('confidence', 'window', 'initial_margin', 'prior_bound')}
     return MarginConfig(margin=mode, calibration=calibration,

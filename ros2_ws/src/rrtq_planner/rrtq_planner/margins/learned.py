@@ -236,10 +236,12 @@ class LearnedBoundPolicy:
         """m, how far from its undisturbed position the robot can be at each step."""
         self.across = np.zeros(0)
         """m, the bound on the deviation from the leg's line at steps 1..N."""
+        self._top = np.zeros((len(self.cells), 3))
         self.observed = np.zeros(len(self.cells))
-        """Per cell, the largest residual (net of the noise allowance, in units of R) taken
-        within ``reach`` of it: above 1 it refutes the prior bound there (up at once on
-        evidence) and is a floor of the cell's bound."""
+        """Per cell, the third largest residual (net of the noise allowance, in units of R)
+        taken within ``reach`` of it: above 1 it refutes the prior bound there (up at once on
+        evidence, three residuals so that one outlier does not) and is a floor of the cell's
+        bound."""
         self._cell_points = shapely.points(self.cells)
         self._local: dict[tuple[str, bytes], tuple[float, np.ndarray]] = {}
         self.nominal = 0.0
@@ -335,12 +337,23 @@ class LearnedBoundPolicy:
             return False
         excess = np.abs(y - self.theta @ z) - self.config.noise_allowance * self.sigma
         level = float((excess / self._prior_residual).max())
-        if level > 0.0:
-            self.observed[near] = np.maximum(self.observed[near], level)
         raised = self.bank.observe(level)
-        if level > 1.0 and self.cell_bound is not None and bool((self.cell_bound[near] < level).any()):
+        if self.legs.leg_steps <= 2:
+            # A leg change moves the rover's spring anchor within a step of the controller's
+            # state: the first residuals of a leg mix two frames and refute nothing.
+            return raised
+        if level <= 0.0:
+            return raised
+        top = np.sort(np.column_stack([self._top[near], np.full(len(near), level)]), axis=1)
+        self._top[near] = top[:, :0:-1]
+        self.observed[near] = self._top[near, 2]
+        third = self.observed[near]
+        if self.cell_bound is not None and bool(((third > 1.0)
+                                                 & (self.cell_bound[near] < third)).any()):
             # Up at once on evidence: the prior is refuted here; the leg's levels follow.
-            self.cell_bound[near] = np.maximum(self.cell_bound[near], level)
+            self.cell_bound[near] = np.where(third > 1.0, np.maximum(self.cell_bound[near],
+                                                                     third),
+                                             self.cell_bound[near])
             self._follow_band()
             raised = True
         return raised
@@ -541,12 +554,12 @@ class LearnedBoundPolicy:
     def obstacle_margin(self, oid: str, polygon: np.ndarray) -> float:
         """The margin (m) of one obstacle by where it is (docs/margins.md §5.1).
 
-        Any leg that can bring the robot near the obstacle runs where the band is taken here:
-        within the window's longest leg plus twice its tube of the obstacle. What the field
-        can add to such a leg, its direction unknown, is the worst-direction tube and spread
-        at the least consistent level of that neighbourhood (as in :meth:`_follow_band`). An
-        obstacle the current leg's corridor comes within the robot radius of is grown by at
-        least the current leg's margin (its nominal part included).
+        A prediction for the legs that will pass it: the worst-direction tube and spread at
+        the least consistent level (:meth:`_least_level`) of the field within the feature
+        spacing (the field's length scale) plus twice that tube of the obstacle, the
+        direction and start of those legs unknown. The guarantee is the current leg's: an
+        obstacle its corridor comes within the robot radius of is grown by at least the
+        current leg's margin (its nominal part included), recomputed at each leg start.
         """
         key = (oid, np.ascontiguousarray(polygon, dtype=float).tobytes())
         if key not in self._local:
@@ -566,12 +579,12 @@ class LearnedBoundPolicy:
             return max(self._margin(), self.legs.leg_max)
         z = self._z()
         dist = np.asarray(shapely.distance(shape, self._cell_points), dtype=float)
-        longest = max(self._leg_lengths() + [self.config.feature_spacing])
+        scale = self.config.feature_spacing
         pad = self.config.cell * math.sqrt(0.5)
         tube, spread = self.tube, self.spread
         level, _ = self._least_level(
             self.cell_bound,
-            lambda lv: np.asarray(dist <= longest + 2.0 * float((lv * tube + z * spread).max())
+            lambda lv: np.asarray(dist <= scale + 2.0 * float((lv * tube + z * spread).max())
                                   + pad))
         if math.isinf(level):
             return max(self._margin(), self.legs.leg_max)
