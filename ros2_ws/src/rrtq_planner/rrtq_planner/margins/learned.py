@@ -107,6 +107,8 @@ class LearnedBoundConfig:
     directions: int = setting(16, doc="directions of a leg's normal the tube is maximised over")
     robot_radius: float = setting(0.5, unit='m', low=0.0, doc='an obstacle within this of the '
                                   "current leg's corridor is grown by that leg's margin")
+    hold_steps: int = setting(40, low=1, doc='steps the rest of a leg is bounded over at least '
+                              'when a fit within it re-anchors the tube')
 
     def __post_init__(self) -> None:
         check(self, finite=True)
@@ -288,6 +290,7 @@ class LearnedBoundPolicy:
             self.flagged = False
         elif sample.t - self.last_fit >= c.evaluation_period - 1e-9 and self.current is not None:
             self._fit(sample.t, state)
+            self._new_tube(sample, state)
             self._follow_band()
             self.model_margin = self._model_margin()
         elif raised:
@@ -482,12 +485,13 @@ class LearnedBoundPolicy:
                 self.legs.started[-(self.config.window + 1):]]
 
     # ------------------------------------------------------------------ margin
-    def _new_tube(self, sample: MarginSample) -> None:
+    def _new_tube(self, sample: MarginSample, state: np.ndarray | None = None) -> None:
         """The current leg under the closed loop the controller runs now (docs/margins.md §5).
 
         Its undisturbed path from its start state, and per step the tube (per unit level) and
         the random part's standard deviation, across the leg's line and in the worst direction
-        (the latter for the corridor the field is bounded over).
+        (the latter for the corridor the field is bounded over). With ``state`` (a fit within
+        the leg): the rest of the leg, from the current state on (§5.1, re-anchoring).
         """
         self.path = None
         if sample.gain is None or sample.horizon <= 0.0 or self.theta is None \
@@ -500,7 +504,10 @@ class LearnedBoundPolicy:
         recent = self.legs.durations[-self.config.window:]
         if recent:
             steps = min(steps, max(max(recent), 1))
-        taus = sample.horizon - self.config.dt * np.arange(steps)
+        elapsed = 0 if state is None else self.legs.leg_steps
+        # The rest of the leg, at least `hold_steps` (a robot held at its last target stays).
+        steps = max(steps - elapsed, self.config.hold_steps) if elapsed else steps
+        taus = np.maximum(sample.horizon - self.config.dt * (elapsed + np.arange(steps)), 0.0)
         gains = np.stack([np.asarray(sample.gain(float(tau)), dtype=float) for tau in taus])
         phi, gamma = self.theta[:, :self.n], self.theta[:, self.n:]
         offset = np.zeros((self.n, 2))
@@ -508,7 +515,7 @@ class LearnedBoundPolicy:
             offset = (phi - np.eye(self.n))[:, :2]
         # D_rob is measured from the line through the leg's start and target (leg.start, as
         # the controller reports it); the replay starts from the full state at the leg start.
-        start = np.asarray(self.legs.started[-1][1], dtype=float)
+        start = np.asarray(self.legs.started[-1][1] if state is None else state, dtype=float)
         origin = np.asarray(sample.leg.start, dtype=float)[:2]
         target = np.asarray(sample.leg.target, dtype=float)[:2]
         line = target - origin
@@ -569,7 +576,9 @@ class LearnedBoundPolicy:
                     else np.zeros(0))
             self._local[key] = (self._neighbourhood_margin(shape), gaps)
         generic, gaps = self._local[key]
-        now = max(self._margin(), self.legs.leg_max)
+        # The bound of the leg's motion from the last anchor on (its past deviation, which
+        # the status's margin keeps, is history for the obstacles).
+        now = self._margin()
         if len(gaps) and np.any(gaps <= np.maximum(self.radius, now) + self.config.robot_radius):
             return max(generic, now)
         return generic
