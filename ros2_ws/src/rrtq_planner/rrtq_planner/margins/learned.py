@@ -1,19 +1,22 @@
 """``learned_bound``: Jha's data-driven bound, turned into a margin through the closed loop.
 
-Per step (``docs/margins.md`` §3-4): the pair (x̄_{k−1}, u_{k−1}) → x̄_k joins the sufficient
+Per step (``docs/margins.md`` §3-5.1): the pair (x̄_{k−1}, u_{k−1}) → x̄_k joins the sufficient
 statistics of the current leg, with the features φ(p_{k−1}) of where the residual acted; a
-residual of the last fitted model above the bank's level (plus the noise allowance) raises
-the level at once (:mod:`.bank`).
+residual on the velocity rows above the prior bound R (plus the noise allowance) counts
+against R in the cells near it, and three such residuals refute R there (up at once).
 
 At each leg start and every ``evaluation_period``: the one-step model x̄_{k+1} ≈ Φ̂x̄_k + Γ̂u_k
 and the residual's field over the plane are fitted together on the last ``window`` legs
 (:func:`.regression.fit_field` with a model block: least squares, as a recursive fit would
 give, but kept as per-leg statistics so that old legs can leave the window, and joint so
-that the linear model cannot soak up the field); r_k is the supremum of the norm of the
-upper band over the visited cells near the robot, and the bank follows it. At each leg
-start: the closed loop Φ̂ − Γ̂K̂(τ) of the controller's current gain, its worst-case tube
-and random spread (:mod:`.tube`). The margin is the nominal deviation of the window's leg
-starts under that loop, plus r times the tube, plus z standard deviations of the spread.
+that the linear model cannot soak up the field), and the refutations are recomputed against
+it. Each cell's bound is the upper band capped by R, or the residuals where R is refuted.
+Then the current leg (from its start, or from the current state within it) is bounded step
+by step along its undisturbed path under the controller's current gain: the field's level at
+each step is the cells' bound within the radius the robot can be at, the radius follows
+from the levels before (an induction over the steps), and the margin is the deviation across
+the leg's line. Each obstacle is grown by the margin of where it is
+(:meth:`LearnedBoundPolicy.obstacle_margin`).
 """
 
 from __future__ import annotations
