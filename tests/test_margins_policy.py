@@ -144,3 +144,51 @@ def test_calibration_round_trip_and_bad_files(tmp_path):
     with pytest.raises(ValueError, match='missing.json'):
         read_calibration(tmp_path / 'missing.json')
     assert math.isfinite(sum(back.scores))
+
+
+def test_learned_bound_grows_each_obstacle_by_the_margin_of_where_it_is():
+    # A prior bound the bump refutes (0.25 m/s² against 0.05): the bump's cells are bounded
+    # by their residuals, the rest of the map by the prior.
+    config = LearnedBoundConfig(region=((-2.0, 40.0), (-2.0, 14.0)), dt=0.05, prior_bound=0.05)
+    policy = LearnedBoundPolicy(config)
+    rows, _, field = _mission(policy, steps=2000)
+    status = rows[-1][0]
+    assert status.local is not None
+    # The bump's centre, where the field is five times the prior, is refuted. (So are some
+    # cells of the first legs, where the model's own error under the strongest probing
+    # exceeds so small a prior: a residual is measured against the model.)
+    centre = int(np.argmin(np.hypot(*(policy.cells - [6.0, 6.0]).T)))
+    assert policy.observed[centre] > 1.0
+    strength = np.linalg.norm(field.acceleration(policy.cells), axis=1)
+    refuted = policy.observed > 1.0
+    assert strength[refuted].mean() > 2.0 * strength[~refuted].mean()
+    # Far from all data (x = 35 m) the prediction is the prior's: level 1, no nominal part.
+    far = np.array([[34.0, 5.0], [36.0, 5.0], [36.0, 7.0], [34.0, 7.0]])
+    level_one = float((policy.tube + policy._z() * policy.spread).max())
+    assert policy.obstacle_margin('far', far) == pytest.approx(level_one)
+    # On the bump the prediction is larger (its cells' bound is above the prior).
+    on = np.array([[5.5, 5.5], [6.5, 5.5], [6.5, 6.5], [5.5, 6.5]])
+    assert policy.obstacle_margin('on', on) > level_one
+    # An obstacle at the current leg's undisturbed path gets at least the leg's margin.
+    p = policy.points[len(policy.points) // 2]
+    at = np.array([p + d for d in ([-0.1, -0.1], [0.1, -0.1], [0.1, 0.1], [-0.1, 0.1])])
+    assert policy.obstacle_margin('at', at) >= status.margin - 1e-12
+
+
+def test_learned_bound_levels_follow_the_cells_the_robot_can_reach_on_its_leg():
+    config = LearnedBoundConfig(region=((-2.0, 40.0), (-2.0, 14.0)), dt=0.05, prior_bound=0.05)
+    policy = LearnedBoundPolicy(config)
+    _mission(policy, steps=2000)
+    # Recomputed here from the cells' bound: at each step, the rung at or above the largest
+    # bound within the radius of the undisturbed position, and the radius from the levels
+    # before it (the induction of docs/margins.md §5.1).
+    z, pad = policy._z(), config.cell * math.sqrt(0.5)
+    widen = 1.0 / math.cos(math.pi / (2 * config.directions))
+    assert policy.radius[0] == pytest.approx(pad)
+    for k in range(len(policy.levels)):
+        near = np.hypot(*(policy.cells - policy.points[k]).T) <= policy.radius[k]
+        assert policy.levels[k] == policy.bank.ceil(float(policy.cell_bound[near].max()))
+        if k + 1 < len(policy.levels):
+            dev = widen * (policy.levels[:k + 1] @ policy.terms[k, :k + 1]).max()
+            assert policy.radius[k + 1] == pytest.approx(dev + z * policy.spread[k] + pad)
+    assert policy.model_margin == pytest.approx(policy.across.max())

@@ -5,6 +5,9 @@
   the traversed path, the perception disc along it, the leg targets;
 - ``timeseries.png``: forces, speed and distance to goal, disturbance, D_rob and its
   maximum, the learned weights (each panel only when its topics were recorded);
+- ``margins.png`` (the margin against the legs' realised deviations) and, for
+  ``learned_bound``, ``field.png`` (the learned field against the true one), the summary's
+  ``margins`` entry (:mod:`rrtq_bringup.report_margins`);
 - ``vf_lpc.png`` and the summary's ``vf_lpc`` entry for a vf_lpc run
   (:mod:`rrtq_bringup.report_vf_lpc`);
 - with ``--video``, ``run.mp4`` or ``run.gif`` (:mod:`rrtq_bringup.video`);
@@ -29,6 +32,7 @@ from rrtq_bringup.leg_table import LegTable, leg_table  # noqa: E402
 from rrtq_bringup.leg_table import summary as leg_summary  # noqa: E402
 from rrtq_bringup.run_data import RunData, embedded_scenario, read_run, recorded_scenario  # noqa: E402
 from rrtq_bringup.mission import MissionConfig  # noqa: E402
+from rrtq_bringup.report_margins import margins_summary  # noqa: E402
 from rrtq_bringup.report_vf_lpc import is_vf_lpc, plot_vf_lpc, vf_lpc_summary  # noqa: E402
 from rrtq_common.polygon_set import PolygonSet  # noqa: E402
 from rrtq_common.yaml_reader import field_default  # noqa: E402
@@ -252,6 +256,13 @@ def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = N
     summary = summarise(data, scenario)
     plot_map(data, scenario, out / 'map.png')
     plot_timeseries(data, scenario, out / 'timeseries.png')
+    if data.topics.get('/safety/status'):
+        field = (recorded_scenario(recording)
+                 if data.topics.get('/safety/disturbance_estimate') else None)
+        margins = margins_summary(recording, field, float(scenario.get('robot_radius', 0.0)),
+                                  out)
+        if margins is not None:
+            summary['margins'] = margins
     if data.critic_w and any(w.size for w in data.critic_w):
         table = leg_table(data, recorded_scenario(recording))
         if table.rows:

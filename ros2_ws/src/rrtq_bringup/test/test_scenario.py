@@ -182,6 +182,7 @@ ERRORS = [
     ({'safety': {'window': 2.5}}, 'safety.window', 'integer'),
     ({'safety': {'initial_margin': -0.1}}, 'safety.initial_margin', '>= 0'),
     ({'safety': {'initial_margin': 'big'}}, 'safety.initial_margin', 'number'),
+    ({'safety': {'prior_bound': 0.0}}, 'safety.prior_bound', '> 0'),
     ({'safety': {'delta': 0.1}}, 'safety.delta', 'allowed: margin'),
     ({'safety': [1]}, 'safety', 'mapping'),
     ({'safety': {'calibration': 'scores.json'}}, 'safety.calibration', 'only for margin: conformal'),
@@ -341,6 +342,9 @@ def test_safety_section_defaults_and_a_calibration_read_from_the_scenario_direct
     sc = parse()
     assert sc.margins.margin is MarginMode.RUNNING_MAX and sc.margins.confidence == 0.95
     assert sc.margins.window == 50 and sc.margins.initial_margin is None
+    assert sc.margins.prior_bound == 0.5
+    sc = parse(safety={'margin': 'learned_bound', 'prior_bound': 0.1})
+    assert sc.margins.margin is MarginMode.LEARNED_BOUND and sc.margins.prior_bound == 0.1
     write_calibration(tmp_path / 'scores.json', Calibration((0.2, 0.4)))
     data = copy.deepcopy(BASE) | {'safety': {'margin': 'conformal', 'confidence': 0.9,
                                              'window': 20, 'initial_margin': 0.3,

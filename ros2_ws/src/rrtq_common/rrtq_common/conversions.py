@@ -6,7 +6,7 @@ the types that cross packages.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 from builtin_interfaces.msg import Time
@@ -72,10 +72,16 @@ def polygon_array(msg: Polygon) -> np.ndarray:
 
 
 def obstacle_array_msg(ns: int, obstacles: Iterable[tuple[str, np.ndarray]],
-                       margin: float = 0.0) -> ObstacleArray:
-    """(id, polygon) pairs in ``map``, each marked as grown by ``margin`` (m)."""
+                       margin: float = 0.0,
+                       margins: Mapping[str, float] | None = None) -> ObstacleArray:
+    """(id, polygon) pairs in ``map``, each marked as grown by ``margin`` (m).
+
+    ``margins``: an obstacle's own margin by id where it has one (learned_bound grows each
+    obstacle by the margin of where it is).
+    """
+    own = margins or {}
     msg = ObstacleArray(margin=float(margin), obstacles=[
-        Obstacle(id=oid, polygon=polygon_msg(poly), margin=float(margin))
+        Obstacle(id=oid, polygon=polygon_msg(poly), margin=float(own.get(oid, margin)))
         for oid, poly in obstacles])
     msg.header.stamp = time_msg(ns)
     msg.header.frame_id = MAP_FRAME

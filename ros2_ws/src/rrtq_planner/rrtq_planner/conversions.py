@@ -7,12 +7,14 @@ from collections.abc import Callable, Sequence
 import numpy as np
 import numpy.typing as npt
 from geometry_msgs.msg import Point, Vector3
-from rrtq_msgs.msg import ControllerState, GuidanceReference, PlannerStats, SafetyStatus
+from rrtq_msgs.msg import (ControllerState, DisturbanceEstimate, GuidanceReference, PlannerStats,
+                           SafetyStatus)
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from rrtq_common.conversions import MAP_FRAME, time_msg
 
+from .margins.learned import FieldEstimate
 from .margins.policy import LegInfo, MarginSample, MarginStatus
 from .guidance import GuidanceOutput
 from .rrtx_config import PlanStatus
@@ -72,6 +74,22 @@ def safety_status_msg(header: Header, step: SafetyStep, margin: MarginStatus) ->
         leg_deviation=float(margin.leg_deviation), legs=int(margin.legs))
     status.header = header
     return status
+
+
+def disturbance_estimate_msg(stamp_ns: int, est: FieldEstimate) -> DisturbanceEstimate:
+    """/safety/disturbance_estimate of one fit (learned_bound)."""
+    mean = np.asarray(est.mean, dtype=np.float32)
+    band = np.asarray(est.band, dtype=np.float32)
+    msg = DisturbanceEstimate(
+        x0=float(est.origin[0]), y0=float(est.origin[1]), spacing=float(est.spacing),
+        nx=int(est.shape[0]), ny=int(est.shape[1]),
+        mean_x=mean[:, 0].tolist(), mean_y=mean[:, 1].tolist(),
+        band_x=band[:, 0].tolist(), band_y=band[:, 1].tolist(),
+        supported=[bool(v) for v in est.supported],
+        bound=float(est.bound), confidence=float(est.confidence), samples=int(est.samples))
+    msg.header.stamp = time_msg(stamp_ns)
+    msg.header.frame_id = MAP_FRAME
+    return msg
 
 
 def actor_gain(weights: npt.ArrayLike, rates: Sequence[float], powers: Sequence[float],

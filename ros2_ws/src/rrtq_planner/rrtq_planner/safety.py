@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import numpy.typing as npt
@@ -133,6 +133,8 @@ class SafetyStep:
     new_collision: bool
     """The collision happened at this step."""
     leg_index: int
+    local_margins: dict[str, float] = dataclasses.field(default_factory=dict)
+    """m, robot radius included: each obstacle's own margin when the policy gives one."""
 
 
 class SafetyMonitor:
@@ -158,6 +160,8 @@ class SafetyMonitor:
         self._augmented_stamp = 0
         self._existing = LivePolygons()
         self._policy_margin: float | None = None
+        self._local: Callable[[str, np.ndarray], float] | None = None
+        self._published_local: dict[str, float] = {}
 
     @property
     def margin(self) -> float:
@@ -194,9 +198,10 @@ class SafetyMonitor:
         (Inside the true obstacle grown by the robot radius is a collision, not this case.)
         """
         self.published_margin = self.margin
+        self._published_local = self._local_margins(obstacles)
         out = []
         for oid, poly in obstacles:
-            margin = self.margin
+            margin = self._published_local.get(oid, self.margin)
             if position is not None:
                 gap = float(shapely.Polygon(poly).distance(shapely.Point(
                     np.asarray(position, dtype=float)[:2])))
@@ -204,8 +209,23 @@ class SafetyMonitor:
             out.append((oid, augment(poly, margin)))
         return out
 
+    def _local_margins(self, obstacles: Sequence[tuple[str, np.ndarray]]) -> dict[str, float]:
+        """Per obstacle, the policy's margin by where it is + robot radius (none: empty)."""
+        if self._local is None:
+            return {}
+        return {oid: self._local(oid, poly) + self.config.robot_radius for oid, poly in obstacles}
+
+    def _local_moved(self) -> bool:
+        """Whether an obstacle's own margin moved by the growth threshold since published."""
+        now = self._local_margins(self._detected)
+        if now.keys() != self._published_local.keys():
+            return True
+        return any(abs(m - self._published_local[oid]) >= self.config.growth_threshold
+                   for oid, m in now.items())
+
     def step(self, stamp_ns: int, position: npt.ArrayLike, detected: OnChange[Obstacles] | None,
-             leg: Leg | None, policy: tuple[float, float, float] | None = None) -> SafetyStep:
+             leg: Leg | None, policy: tuple[float, float, float] | None = None,
+             local: Callable[[str, np.ndarray], float] | None = None) -> SafetyStep:
         """One step of the safety node (RRT-QX §5).
 
         Measure D_rob on the current leg; republish the augmented set when the margin has
@@ -225,6 +245,11 @@ class SafetyMonitor:
         policy : (d_rob, d_rob_max, margin), optional
             m: a margin policy's answer at this step (:meth:`follow`); None: the running
             maximum of D_rob on ``leg`` (the paper's margin).
+        local : callable, optional
+            (id, polygon) -> m: the policy's margin of each obstacle by where it is
+            (learned_bound, docs/margins.md §5.1); the augmented set is republished when one
+            of them has moved by the growth threshold. None: every obstacle is grown by the
+            margin.
         """
         p = np.asarray(position, dtype=float)[:2]
         changed = detected is not None and detected.stamp_ns != self._detected_stamp
@@ -234,6 +259,9 @@ class SafetyMonitor:
         grown = False
         if policy is not None:
             grown = self.follow(*policy)
+            if local is not None or self._local is not None:
+                self._local = local
+                grown = self._local_moved() if local is not None else True
         elif leg is not None and leg.d0 > 0.0:
             grown = self.update(leg.start, leg.target, p)
         swallowed = self._published.nearest(p)[0] < 0.0
@@ -253,7 +281,8 @@ class SafetyMonitor:
             augmented=augmented, augmented_stamp_ns=self._augmented_stamp, d_rob=self.d_rob,
             d_rob_max=self.d_rob_max, margin=self.margin, clearance=float(gap),
             nearest=nearest, collision=self.collided, new_collision=new_collision,
-            leg_index=leg.index if leg is not None and leg.d0 > 0.0 else 0)
+            leg_index=leg.index if leg is not None and leg.d0 > 0.0 else 0,
+            local_margins=dict(self._published_local))
 
 
 def clearance(position: npt.ArrayLike, polygons: PolygonSet | Sequence[np.ndarray],

@@ -18,7 +18,8 @@ from typing import Any
 
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rrtq_msgs.msg import ControllerState, ObstacleArray, PerceptionStatus, SafetyStatus
+from rrtq_msgs.msg import (ControllerState, DisturbanceEstimate, ObstacleArray, PerceptionStatus,
+                           SafetyStatus)
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
@@ -29,9 +30,11 @@ from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
 from rrtq_common.world import TrueObstacles
 from rrtq_common.world_yaml import WorldSource, load_world
-from rrtq_planner.conversions import leg_of, margin_sample, safety_status_msg
+from rrtq_planner.conversions import (disturbance_estimate_msg, leg_of, margin_sample,
+                                     safety_status_msg)
 from rrtq_planner.margins.build import MarginConfig, make_policy
 from rrtq_planner.margins.calibration import read_calibration
+from rrtq_planner.margins.learned import LearnedBoundPolicy
 from rrtq_planner.margins.policy import MarginMode
 from rrtq_planner.safety import SafetyConfig, SafetyMonitor
 
@@ -50,12 +53,18 @@ class SafetyNode(Node):
         self.policy = make_policy(
             margins.margin, region=world.bounds, dt=run.dt, confidence=margins.confidence,
             window=margins.window, initial_margin=margins.initial_margin,
-            calibration=calibration, frame=margins.frame, n=self.dims.n, m=self.dims.m)
+            calibration=calibration, frame=margins.frame, n=self.dims.n, m=self.dims.m,
+            prior_bound=margins.prior_bound, robot_radius=world.robot_radius)
         self.needs_gain = margins.margin is MarginMode.LEARNED_BOUND
         self.monitor = SafetyMonitor(config, TrueObstacles.for_scenario(world))
         self.aug_pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_AUGMENTED,
                                              qos.LATCHED)
         self.status_pub = self.create_publisher(SafetyStatus, topics.SAFETY_STATUS, qos.STREAM)
+        # learned_bound only: its field and band at each fit (for the record and the report).
+        self.estimate_pub = (self.create_publisher(DisturbanceEstimate,
+                                                   topics.DISTURBANCE_ESTIMATE, qos.LATCHED)
+                             if isinstance(self.policy, LearnedBoundPolicy) else None)
+        self._fits = 0
         self.gate = StepGate(
             [Requirement('perception', followup='detected',
                          names=lambda m: conv.stamp_ns(m.detected_stamp)),
@@ -79,11 +88,18 @@ class SafetyNode(Node):
                 f'{margin.leg_margin:.3f} m in force for it at t={step.stamp_ns * 1e-9:.2f} s '
                 f'({margin.mode}; violation {margin.violations}): the margin is raised for '
                 'the rest of the leg')
+        if self.estimate_pub is not None and isinstance(self.policy, LearnedBoundPolicy) \
+                and self.policy.fits != self._fits:
+            self._fits = self.policy.fits
+            est = self.policy.estimate()
+            if est is not None:
+                self.estimate_pub.publish(disturbance_estimate_msg(step.stamp_ns, est))
         done = self.monitor.step(step.stamp_ns, x[:2], conv.changed_obstacles(detected),
-                                 leg_of(state), (margin.d_rob, margin.d_rob_max, margin.margin))
+                                 leg_of(state), (margin.d_rob, margin.d_rob_max, margin.margin),
+                                 margin.local)
         if done.augmented is not None:
             self.aug_pub.publish(conv.obstacle_array_msg(step.stamp_ns, done.augmented,
-                                                         done.margin))
+                                                         done.margin, done.local_margins))
         if done.new_collision:
             self.get_logger().error(f'collision with {done.nearest} at t={step.stamp_ns * 1e-9:.2f}'
                                     f' s, ({x[0]:.2f}, {x[1]:.2f})')

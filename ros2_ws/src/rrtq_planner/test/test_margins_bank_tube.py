@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from rrtq_planner.margins.bank import BoundBank
-from rrtq_planner.margins.tube import (closed_loop, nominal_deviation, random_deviation,
-                                       tube_gains)
+from rrtq_planner.margins.tube import (closed_loop, leg_tube_terms, nominal_deviation,
+                                       nominal_path, random_deviation, tube_gains)
 from rrtq_testing import controller_reference as ref
 
 
@@ -113,3 +113,44 @@ def test_nominal_deviation_is_the_simulated_deviation_from_the_leg_line():
         worst = max(worst, abs(x[1]))
     assert dev[0] == pytest.approx(worst, rel=1e-9)
     assert worst > 0.05
+
+
+def test_step_levels_tube_is_attained_across_the_leg_and_sums_to_the_uniform_tube():
+    plant, gains = _loop()
+    shape = np.array([1e-4, 1e-4, 5e-3, 5e-3])
+    c = np.array([math.cos(1.1), math.sin(1.1)])
+    worst, along = leg_tube_terms(plant.Ad, plant.Gd, gains, shape, c)
+    # A uniform level gives back the tube of tube_gains.
+    tube = tube_gains(plant.Ad, plant.Gd, gains, shape)
+    np.testing.assert_allclose(worst.sum(axis=1).max(axis=1) / math.cos(math.pi / 32), tube,
+                               rtol=1e-12)
+    # Levels that change along the leg: the sequence d_j = ℓ_j s ∘ sign(cᵀPΨ(k, j+1)),
+    # simulated from rest, attains Σ_j ℓ_j along[k-1, j] across the line at step k.
+    rng = np.random.default_rng(2)
+    levels = rng.uniform(0.0, 3.0, len(gains))
+    a = closed_loop(plant.Ad, plant.Gd, gains)
+    k = 80
+    psi = [np.eye(4)]
+    for j in range(k - 1, 0, -1):
+        psi.insert(0, psi[0] @ a[j])
+    x = np.zeros(4)
+    for j in range(k):
+        x = a[j] @ x + levels[j] * shape * np.sign(c @ psi[j][:2])
+    assert abs(c @ x[:2]) == pytest.approx(levels[:k] @ along[k - 1, :k])
+    assert np.all(along[k - 1, k:] == 0.0)
+
+
+def test_nominal_path_is_the_simulated_response():
+    plant, gains = _loop()
+    start = np.array([1.0, -2.0, 0.4, 0.3])
+    target = np.array([4.0, 2.0])
+    pos, dev = nominal_path(plant.Ad, plant.Gd, np.zeros((4, 2)), gains, start, target)
+    a = closed_loop(plant.Ad, plant.Gd, gains)
+    xbar = start - np.array([*target, 0.0, 0.0])
+    line = (target - start[:2]) / np.linalg.norm(target - start[:2])
+    for k in range(len(gains)):
+        xbar = a[k] @ xbar
+        np.testing.assert_allclose(pos[k], xbar[:2] + target, atol=1e-12)
+        assert dev[k] == pytest.approx(abs(line[0] * xbar[1] - line[1] * xbar[0]), abs=1e-12)
+    assert dev.max() == pytest.approx(float(nominal_deviation(
+        plant.Ad, plant.Gd, np.zeros((4, 2)), gains, start[None], target[None])[0]))

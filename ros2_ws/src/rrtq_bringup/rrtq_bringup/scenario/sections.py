@@ -32,7 +32,8 @@ _ROVER_KEYS = ('model', 'mass', 'stiffness', 'damping', 'spring_anchor', 'force_
 _LTI_KEYS = ('model', 'A', 'B', 'spring_anchor', 'force_limit')
 _DIST_KEYS = ('model', 'F', 'amplitude', 'frequency', 'gamma', 'bumps')
 _BUMP_KEYS = ('center', 'radius', 'value')
-_SAFETY_KEYS = ('margin', 'confidence', 'window', 'initial_margin', 'calibration')
+_SAFETY_KEYS = ('margin', 'confidence', 'window', 'initial_margin', 'calibration',
+                'prior_bound')
 _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
@@ -154,7 +155,7 @@ def read_safety(r: Reader, raw: Any, base: str, plant: PlantConfig) -> MarginCon
             raise r.error('safety.calibration', str(exc)) from None
         calibration = path
     values = {name: r.setting(data, name, MarginConfig, key)
-              for name in ('confidence', 'window', 'initial_margin')}
+              for name in ('confidence', 'window', 'initial_margin', 'prior_bound')}
     return MarginConfig(margin=mode, calibration=calibration,
                         frame=ModelFrame(plant.spring_anchor.value), **values)
 

@@ -31,6 +31,9 @@ class MarginConfig:
                                       '(absolute path; conformal: its scores fill the window)')
     frame: ModelFrame = setting(ModelFrame.LEG_TARGET, doc='learned_bound: the one-step '
                                 "model's frame (plant.spring_anchor)")
+    prior_bound: float = setting(0.5, unit='m/s^2', low=0.0, low_open=True,
+                                 doc='learned_bound: R, the field strength assumed possible '
+                                 'where the data say nothing (Jha\'s assumption 3.1)')
 
     def __post_init__(self) -> None:
         check(self, finite=True)
@@ -40,7 +43,8 @@ def make_policy(mode: MarginMode | str, *, region: Bounds, dt: float,
                 confidence: float = 0.95, window: int = 50,
                 initial_margin: float | None = None, calibration: Sequence[float] = (),
                 frame: ModelFrame | str = ModelFrame.LEG_TARGET,
-                n: int = 4, m: int = 2) -> MarginPolicy:
+                n: int = 4, m: int = 2, prior_bound: float = 0.5,
+                robot_radius: float = 0.5) -> MarginPolicy:
     """The margin policy of ``mode``.
 
     Parameters
@@ -55,6 +59,9 @@ def make_policy(mode: MarginMode | str, *, region: Bounds, dt: float,
         The ``safety:`` keys (1 − δ; legs kept; m, None: the running max; earlier scores).
     frame
         learned_bound: ``plant.spring_anchor``.
+    prior_bound, robot_radius
+        learned_bound: R (m/s²), the field assumed possible where the data say nothing; the
+        robot's radius (m), for which obstacles the current leg's margin applies to.
     """
     mode = MarginMode(mode)
     if mode is MarginMode.RUNNING_MAX:
@@ -63,5 +70,7 @@ def make_policy(mode: MarginMode | str, *, region: Bounds, dt: float,
         return ConformalPolicy(ConformalConfig(confidence=confidence, window=window),
                                initial_margin, calibration)
     return LearnedBoundPolicy(LearnedBoundConfig(region=region, dt=dt, frame=ModelFrame(frame),
-                                                 confidence=confidence, window=window),
+                                                 confidence=confidence, window=window,
+                                                 prior_bound=prior_bound,
+                                                 robot_radius=robot_radius),
                               n, m, initial_margin)

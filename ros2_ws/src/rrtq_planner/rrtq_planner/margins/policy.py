@@ -112,6 +112,9 @@ class MarginStatus:
     legs: int = 0
     """Legs measured so far, the current one included (a calibration file is read off
     ``leg_deviation`` at the last step of each)."""
+    local: Callable[[str, np.ndarray], float] | None = None
+    """learned_bound, once it has a bound: the margin (m) of one obstacle (id, polygon (k, 2))
+    by where it is (docs/margins.md §5.1); None: every obstacle is grown by ``margin``."""
 
 
 class MarginPolicy(Protocol):

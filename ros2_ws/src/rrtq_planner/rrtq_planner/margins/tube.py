@@ -29,7 +29,9 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ['closed_loop', 'tube_gains', 'random_deviation', 'nominal_deviation', 'tube_margin']
+__all__ = ['closed_loop', 'tube_gains', 'leg_tube', 'leg_tube_terms', 'position_covariance',
+           'random_deviation', 'leg_spread',
+           'nominal_deviation', 'nominal_path', 'tube_margin']
 
 
 def closed_loop(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray) -> np.ndarray:
@@ -40,6 +42,55 @@ def closed_loop(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray) -> np.nda
 def _directions(count: int) -> np.ndarray:
     ang = math.pi * np.arange(count) / count
     return np.column_stack([np.cos(ang), np.sin(ang)])
+
+
+def _projected_sums(a: np.ndarray, s: np.ndarray, c: np.ndarray) -> np.ndarray:
+    """Σ_{j<k} Σ_i s_i |cᵀPΨ(k, j+1)e_i| for k = 1..N and each row c of ``c``: (N, D)."""
+    N, n = a.shape[0], a.shape[1]
+    out = np.zeros((N, len(c)))
+    # At iteration k, blocks = [Ψ(k+1, 1), ..., Ψ(k+1, k+1) = I]; Ψ(k+1, j+1) = A_k Ψ(k, j+1)
+    # multiplies on the left, so whole blocks are kept, not just their position rows.
+    # Kept right-aligned in one array: at iteration k, blocks[N-1-k:] (oldest first).
+    blocks = np.empty((N, n, n))
+    blocks[N - 1] = np.eye(n)
+    for k in range(N):
+        if k:
+            blocks[N - 1 - k:N - 1] = a[k] @ blocks[N - k:]
+            blocks[N - 1] = np.eye(n)
+        proj = c @ blocks[N - 1 - k:, :2, :]                            # cᵀPΨ, (k+1, D, n)
+        out[k] = (np.abs(proj) @ s).sum(axis=0)
+    return out
+
+
+def leg_tube_terms(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray,
+                   shape: npt.ArrayLike, normal: npt.ArrayLike | None,
+                   directions: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """The tube's terms step by step, for a level that changes along the leg.
+
+    Returns (worst (N, N, D), along (N, N)): entry [k, j] is Σ_i s_i |cᵀPΨ(k+1, j+1)e_i|,
+    the deviation at step k + 1 per unit level of the residual at step j (zero for j > k),
+    for each of the D directions of :func:`tube_gains` and for the unit vector ``normal``
+    (zeros when None). With a level ℓ_j per step, the deviation at step k + 1 is at most
+    max_c Σ_j ℓ_j worst[k, j, c] / cos(π/2D) in any direction, Σ_j ℓ_j along[k, j] across
+    the leg's line.
+    """
+    s = np.asarray(shape, dtype=float)
+    a = closed_loop(phi, gamma, gains)
+    N, n = a.shape[0], a.shape[1]
+    c = _directions(directions)
+    if normal is not None:
+        c = np.vstack([c, np.asarray(normal, dtype=float).reshape(1, 2)])
+    terms = np.zeros((N, N, len(c)))
+    blocks = np.empty((N, n, n))
+    blocks[N - 1] = np.eye(n)
+    for k in range(N):
+        if k:
+            blocks[N - 1 - k:N - 1] = a[k] @ blocks[N - k:]
+            blocks[N - 1] = np.eye(n)
+        proj = c @ blocks[N - 1 - k:, :2, :]                            # (k+1, D, n), j = 0..k
+        terms[k, :k + 1] = np.abs(proj) @ s
+    along = terms[:, :, directions] if normal is not None else np.zeros((N, N))
+    return terms[:, :, :directions], along
 
 
 def tube_gains(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray, shape: npt.ArrayLike,
@@ -62,30 +113,33 @@ def tube_gains(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray, shape: npt
     numpy.ndarray, shape (N,)
         Entry k − 1 is the gain at step k; multiply by the level r.
     """
+    return leg_tube(phi, gamma, gains, shape, None, directions)[0]
+
+
+def leg_tube(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray, shape: npt.ArrayLike,
+             normal: npt.ArrayLike | None, directions: int = 16) -> tuple[np.ndarray, np.ndarray]:
+    """Per unit level: the tube in the worst direction, and along one leg's ``normal``.
+
+    Returns (worst, along), each (N,): ``worst`` as :func:`tube_gains` (the radius of a disc
+    about the undisturbed position that holds the disturbed one), ``along`` the exact sum for
+    the unit vector ``normal`` (zeros when it is None): the bound on the deviation across
+    that leg's line.
+    """
     s = np.asarray(shape, dtype=float)
     a = closed_loop(phi, gamma, gains)
-    N, n = a.shape[0], a.shape[1]
     c = _directions(directions)
-    widen = 1.0 / math.cos(math.pi / (2 * directions))
-    out = np.zeros(N)
-    # At iteration k, blocks = [Ψ(k+1, 1), ..., Ψ(k+1, k+1) = I]; Ψ(k+1, j+1) = A_k Ψ(k, j+1)
-    # multiplies on the left, so whole blocks are kept, not just their position rows.
-    # Kept right-aligned in one array: at iteration k, blocks[N-1-k:] (oldest first).
-    blocks = np.empty((N, n, n))
-    blocks[N - 1] = np.eye(n)
-    for k in range(N):
-        if k:
-            blocks[N - 1 - k:N - 1] = a[k] @ blocks[N - k:]
-            blocks[N - 1] = np.eye(n)
-        proj = c @ blocks[N - 1 - k:, :2, :]                            # cᵀPΨ, (k+1, D, n)
-        out[k] = widen * (np.abs(proj) @ s).sum(axis=0).max()
-    return out
+    if normal is not None:
+        c = np.vstack([c, np.asarray(normal, dtype=float).reshape(1, 2)])
+    sums = _projected_sums(a, s, c)
+    worst = sums[:, :directions].max(axis=1) / math.cos(math.pi / (2 * directions))
+    along = sums[:, directions] if normal is not None else np.zeros(len(sums))
+    return worst, along
 
 
-def random_deviation(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray,
-                     noise: npt.ArrayLike, probing: npt.ArrayLike,
-                     correlation: float) -> np.ndarray:
-    """Standard deviation (m) of the position along the worst normal, k = 1..N.
+def position_covariance(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray,
+                        noise: npt.ArrayLike, probing: npt.ArrayLike,
+                        correlation: float) -> np.ndarray:
+    """(Σ_xx, Σ_yy, Σ_xy) (N, 3) of the position's random part, k = 1..N.
 
     The residual noise is white with standard deviations ``noise`` (n,); the probing is an
     AR(1) (the controller's Ornstein-Uhlenbeck noise sampled every Δt) with stationary
@@ -104,14 +158,39 @@ def random_deviation(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray,
     big = np.zeros((n + m, n + m))
     big[:n, n:] = gamma
     big[n:, n:] = rho * np.eye(m)
-    pos = np.zeros((N, 3))                # (Σ_xx, Σ_yy, Σ_xy) of the position
+    pos = np.zeros((N, 3))
     for k in range(N):
         big[:n, :n] = a[k]
         cov = big @ cov @ big.T + q
         pos[k] = cov[0, 0], cov[1, 1], cov[0, 1]
+    return pos
+
+
+def random_deviation(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray,
+                     noise: npt.ArrayLike, probing: npt.ArrayLike,
+                     correlation: float) -> np.ndarray:
+    """Standard deviation (m) of the position along the worst normal, k = 1..N.
+
+    See :func:`position_covariance` for the model of the noise and the probing.
+    """
+    return leg_spread(position_covariance(phi, gamma, gains, noise, probing, correlation),
+                      None)[0]
+
+
+def leg_spread(pos: np.ndarray, normal: npt.ArrayLike | None) -> tuple[np.ndarray, np.ndarray]:
+    """Standard deviations (worst direction, along ``normal``) from :func:`position_covariance`.
+
+    The worst direction's is √λ_max of the 2 × 2 covariance; ``normal`` None gives zeros for
+    the second.
+    """
     half = 0.5 * (pos[:, 0] + pos[:, 1])
     top = half + np.sqrt((0.5 * (pos[:, 0] - pos[:, 1])) ** 2 + pos[:, 2] ** 2)
-    return np.sqrt(np.maximum(top, 0.0))
+    worst = np.sqrt(np.maximum(top, 0.0))
+    if normal is None:
+        return worst, np.zeros(len(pos))
+    c = np.asarray(normal, dtype=float)
+    var = c[0] ** 2 * pos[:, 0] + c[1] ** 2 * pos[:, 1] + 2.0 * c[0] * c[1] * pos[:, 2]
+    return worst, np.sqrt(np.maximum(var, 0.0))
 
 
 def nominal_deviation(phi: np.ndarray, gamma: np.ndarray, offset: np.ndarray,
@@ -151,6 +230,36 @@ def nominal_deviation(phi: np.ndarray, gamma: np.ndarray, offset: np.ndarray,
                        np.abs((normal * xbar[:, :2]).sum(axis=1)))
         worst = np.maximum(worst, dev)
     return worst
+
+
+def nominal_path(phi: np.ndarray, gamma: np.ndarray, offset: np.ndarray, gains: np.ndarray,
+                 start: npt.ArrayLike, target: npt.ArrayLike,
+                 origin: npt.ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The undisturbed response of one leg under the model: positions and deviations.
+
+    Returns (positions (N, 2), world frame, at k = 1..N; |cᵀPx̄_k^nom| (N,), the distance from
+    the leg's line through ``origin`` (default the start's position) and the target, or from
+    the target for a zero-length leg) for the leg from the full state ``start`` toward the
+    position ``target``; see :func:`nominal_deviation` for ``offset``.
+    """
+    x = np.array(start, dtype=float)
+    tgt = np.array(target, dtype=float)[:2]
+    xbar = x.copy()
+    xbar[:2] -= tgt
+    along = (x[:2] if origin is None else np.asarray(origin, dtype=float)[:2]) - tgt
+    along = -along
+    length = float(np.linalg.norm(along))
+    drive = offset @ tgt
+    pos = np.zeros((len(gains), 2))
+    for k, a_k in enumerate(closed_loop(phi, gamma, gains)):
+        xbar = a_k @ xbar + drive
+        pos[k] = xbar[:2]
+    if length < 1e-12:
+        dev = np.linalg.norm(pos, axis=1)
+    else:
+        normal = np.array([-along[1], along[0]]) / length
+        dev = np.abs(pos @ normal)
+    return pos + tgt, dev
 
 
 def tube_margin(residual_gains: np.ndarray, bound: float, spread: np.ndarray,
