@@ -201,6 +201,8 @@ class LearningDriver(Driver):
         if event is LegEvent.NEW_LEG:
             c.start_leg(self.legs.x_bar(x), t, completed=self.legs.completed,
                         moved=self._moved(before))
+        elif event is LegEvent.RENEWED:
+            c.renew_horizon(self.legs.x_bar(x), t)
         elif (event is LegEvent.GOAL_REACHED and self.legs.leg is not None
               and self.legs.leg.d0 > self.legs.skip_radius):
             # a leg to where the robot already is (the hold before the first path, or

@@ -8,6 +8,7 @@ D <= ρ D0 the current state becomes the next leg's initial state.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 from dataclasses import dataclass
 
@@ -26,6 +27,10 @@ class LegEvent(enum.Enum):
     GOAL_REACHED = 'goal_reached'
     """The window of the last waypoint was entered; the leg continues (station keeping)."""
     NO_PLAN = 'no_plan'
+    RENEWED = 'renewed'
+    """Station keeping on the last waypoint ran through its horizon: the same leg goes on
+    with a fresh horizon (receding), since past it the finite-horizon gain K(0) holds no
+    position (R⁻¹BᵀP(T): velocity only) and the learned one is unidentified there."""
 
 
 @dataclass(frozen=True)
@@ -131,6 +136,10 @@ class LegSequencer:
         inside = self.distance(x) <= self.rho * self.leg.d0
         last = self._next >= len(self._waypoints) - 1
         self.completed = False
+        if self.goal_reached and last and t - self.leg.start_time >= self.horizon:
+            self.leg = dataclasses.replace(self.leg, start_time=float(t), x0=x.copy(),
+                                           d0=self.distance(x))
+            return LegEvent.RENEWED
         if inside and not last:
             self.completed = self.leg.d0 > self.skip_radius   # a leg of no length proves nothing
             self._next += 1

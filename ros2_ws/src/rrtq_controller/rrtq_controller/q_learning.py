@@ -139,6 +139,17 @@ class QLearningController(WeightReadout):
         self._held = False
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
 
+    def renew_horizon(self, x0_bar: Array, t: float) -> None:
+        """Keep station on a reached target with a fresh horizon from time t (s).
+
+        The same leg goes on as a new finite-horizon problem from x̄0 (receding horizon):
+        τ restarts at T, the divergence watch takes x̄0 as its reference; no leg is
+        counted (no policy evaluation, no probing decay, no widening of the time basis).
+        """
+        self._t0 = float(t)
+        self._prev = None
+        self._watch.start(np.asarray(x0_bar, dtype=float))
+
     def completed_leg(self) -> None:
         """Mark the current leg as completed (it entered its window).
 

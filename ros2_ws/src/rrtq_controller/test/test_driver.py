@@ -66,3 +66,28 @@ def test_an_empty_plan_holds_the_robot_where_it_is():
         x = phi @ x + gam @ out.u
     assert np.allclose(out.leg_target, [1.0, 2.0])
     assert np.linalg.norm(x[2:]) < 0.05 and np.linalg.norm(x[:2] - [1.0, 2.0]) < 0.3
+
+
+def test_keeping_station_past_the_horizon_renews_it_and_holds_the_position():
+    """Seen in the defaults-only bench: the robot held where it was (no path) for 18 s, and
+    past the horizon the controller used K̂(τ = 0), which holds no position (the optimum's
+    K(0) = R⁻¹BᵀP(T) acts on velocity only) and was unidentified: it drove the robot 16 m
+    into an obstacle. Station keeping renews the horizon instead: τ never stays at 0, and a
+    push long after the horizon is taken back."""
+    dt = 0.05
+    phi, gam = zoh(dt)
+    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=PD, probing_std=0.0)
+    driver = LearningDriver(config, 4, 2, 1, np.random.default_rng(1))
+    x = np.array([1.0, 2.0, 0.0, 0.0])
+    driver.set_plan([], x, 0.0)
+    taus, events = [], set()
+    for k in range(int(45 / dt)):
+        if k == int(30 / dt):
+            x = x + np.array([0.0, 0.0, 1.0, -0.5])          # a push, 30 s into the hold
+        out = driver.step(k * dt, x)
+        taus.append(out.time_to_go)
+        events.add(out.event)
+        x = phi @ x + gam @ out.u
+    assert 'renewed' in events
+    assert min(taus[int(10.5 / dt):]) > 0.0
+    assert np.linalg.norm(x[:2] - [1.0, 2.0]) < 0.1 and np.linalg.norm(x[2:]) < 0.05
