@@ -29,13 +29,17 @@ class SupervisorNode(Node):
         self.goal_pub.publish(goal_msg)
         self.pause_pub = self.create_publisher(Empty, topics.SIMULATOR_PAUSE, qos.LATCHED)
         self.last_odom_ns = -1
-        self.create_subscription(Odometry, topics.ODOM, self.on_odom, qos.STREAM)
+        # /odom as bytes, read as the step's nodes read it (rrtq_common.inputs).
+        self.create_subscription(Odometry, topics.ODOM, self.on_odom_bytes, qos.STREAM, raw=True)
         self.create_subscription(WrenchStamped, topics.CMD_FORCE, self.on_cmd, qos.STREAM)
         self.create_subscription(ControllerState, topics.CONTROLLER_STATE, self.on_state,
                                  qos.STREAM)
         self.create_subscription(PlannerStats, topics.PLANNER_STATS, self.on_stats, qos.STREAM)
 
-    def on_odom(self, msg: Odometry) -> None:
+    def on_odom_bytes(self, data: bytes) -> None:
+        self.on_odom(conv.read_odometry(data))
+
+    def on_odom(self, msg: Odometry | conv.OdometryReading) -> None:
         stamp = conv.stamp_ns(msg.header.stamp)
         if stamp <= self.last_odom_ns:
             return

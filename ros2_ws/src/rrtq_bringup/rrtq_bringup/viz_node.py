@@ -31,7 +31,9 @@ from rrtq_bringup.viz import (AUGMENTED, CURRENT_TARGET_COLOR, CURRENT_TARGET_NS
                               PERCEPTION_NS, RGBA, ROBOT_COLOR, ROBOT_NS, TRUTH, LayerStyle,
                               LegTargets, MarkerLayer, Shape, VizConfig, shape_points)
 from rrtq_common import qos, topics
-from rrtq_common.conversions import MAP_FRAME, ROBOT_FRAME, obstacle_array
+from rrtq_common.conversions import (MAP_FRAME, ROBOT_FRAME, OdometryReading, obstacle_array,
+                                     read_odometry)
+from rrtq_common.executors import NODE_OPTIONS
 from rrtq_common.params import declare_config, spin_node
 
 LAYERS = ((topics.OBSTACLES_TRUTH, topics.VIZ_TRUTH, TRUTH),
@@ -77,12 +79,13 @@ class VizNode(Node):
     """Publish /tf and the markers of the 3D panel from the graph's own topics."""
 
     def __init__(self, **kwargs) -> None:
-        super().__init__('viz', **kwargs)
+        super().__init__('viz', **NODE_OPTIONS, **kwargs)
         self.config = declare_config(self, VizConfig)
         self.tf_pub = self.create_publisher(TFMessage, topics.TF, qos.STREAM)
         self.robot_pub = self.create_publisher(MarkerArray, topics.VIZ_ROBOT, qos.LATCHED)
         self.legs_pub = self.create_publisher(MarkerArray, topics.VIZ_LEG_TARGETS, qos.LATCHED)
-        self.create_subscription(Odometry, topics.ODOM, self.on_odom, qos.STREAM)
+        # /odom as bytes, read as the step's nodes read it (rrtq_common.inputs).
+        self.create_subscription(Odometry, topics.ODOM, self.on_odom_bytes, qos.STREAM, raw=True)
         self.create_subscription(ControllerState, topics.CONTROLLER_STATE, self.on_state,
                                  qos.STREAM)
         for source, target, style in LAYERS:
@@ -96,20 +99,22 @@ class VizNode(Node):
         layer = MarkerLayer()
         return lambda msg: publisher.publish(layer_msg(msg, style, layer))
 
-    def on_odom(self, msg: Odometry) -> None:
+    def on_odom_bytes(self, data: bytes) -> None:
+        self.on_odom(read_odometry(data))
+
+    def on_odom(self, msg: OdometryReading) -> None:
         transform = TransformStamped(header=msg.header, child_frame_id=ROBOT_FRAME)
         transform.header.frame_id = MAP_FRAME
-        position = msg.pose.pose.position
-        transform.transform.translation.x = position.x
-        transform.transform.translation.y = position.y
-        transform.transform.translation.z = position.z
-        transform.transform.rotation = msg.pose.pose.orientation
+        translation = transform.transform.translation
+        translation.x, translation.y, translation.z = msg.position
+        rotation = transform.transform.rotation
+        rotation.x, rotation.y, rotation.z, rotation.w = msg.orientation
         self.tf_pub.publish(TFMessage(transforms=[transform]))
         if not self._robot_sent:
             self._robot_sent = True
             self.robot_pub.publish(self._robot_markers(msg))
 
-    def _robot_markers(self, odom: Odometry) -> MarkerArray:
+    def _robot_markers(self, odom: OdometryReading) -> MarkerArray:
         markers = []
         for ns, radius, height, rgba in (
                 (ROBOT_NS, self.config.robot_radius, 0.3, ROBOT_COLOR),

@@ -6,13 +6,16 @@ the types that cross packages.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterable, Mapping
+from typing import NamedTuple
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point32, Polygon, PoseStamped
 from nav_msgs.msg import Odometry, Path
 from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Header
 from rrtq_msgs.msg import Obstacle, ObstacleArray
 
 from rrtq_common.lockstep import OnChange
@@ -55,8 +58,52 @@ def odometry_msg(ns: int, x: np.ndarray) -> Odometry:
     return msg
 
 
-def odometry_state(msg: Odometry) -> np.ndarray:
-    """(p_x, p_y, v_x, v_y) from an odometry message."""
+class OdometryReading(NamedTuple):
+    """What the graph's nodes read of an /odom message (:func:`read_odometry`)."""
+
+    header: Header
+    position: tuple[float, float, float]             # pose.pose.position, m
+    orientation: tuple[float, float, float, float]   # pose.pose.orientation x, y, z, w
+    velocity: tuple[float, float]                    # twist.twist.linear x, y, m/s
+
+
+_STAMP = struct.Struct('<iI')
+_LENGTH = struct.Struct('<I')
+_POSE = struct.Struct('<7d')
+_LINEAR = struct.Struct('<2d')
+_COVARIANCE = 36 * 8
+
+
+def read_odometry(data: bytes) -> OdometryReading:
+    """An /odom message's header, pose and velocity, read from its CDR bytes.
+
+    Every node of a step reads /odom; deserialising the whole nav_msgs/Odometry (ten nested
+    messages and two covariance arrays) cost ~30 us per reader, reading these fields a few
+    struct unpacks. The doubles are the message's own, bit for bit.
+    """
+    if data[:2] != b'\x00\x01':
+        raise ValueError('not little-endian CDR')
+    body = memoryview(data)[4:]          # alignment counts from after the encapsulation
+
+    def string(at: int) -> tuple[str, int]:
+        at += -at % 4
+        (size,) = _LENGTH.unpack_from(body, at)
+        return bytes(body[at + 4:at + 3 + size]).decode(), at + 4 + size
+
+    sec, nanosec = _STAMP.unpack_from(body, 0)
+    frame_id, at = string(8)
+    _child, at = string(at)
+    at += -at % 8
+    pose = _POSE.unpack_from(body, at)
+    linear = _LINEAR.unpack_from(body, at + _POSE.size + _COVARIANCE)
+    return OdometryReading(Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id),
+                           pose[:3], pose[3:], linear)
+
+
+def odometry_state(msg: Odometry | OdometryReading) -> np.ndarray:
+    """(p_x, p_y, v_x, v_y) from an odometry message or its reading."""
+    if isinstance(msg, OdometryReading):
+        return np.array([msg.position[0], msg.position[1], msg.velocity[0], msg.velocity[1]])
     return np.array([msg.pose.pose.position.x, msg.pose.pose.position.y,
                      msg.twist.twist.linear.x, msg.twist.twist.linear.y])
 

@@ -30,6 +30,9 @@ class PolygonSet:
         The polygons; their index in this sequence names them in every answer.
     """
 
+    SMALL = 16
+    """Up to this many polygons, :meth:`nearest` and :meth:`within` test every one."""
+
     def __init__(self, polygons: Sequence[npt.ArrayLike]) -> None:
         polys = [np.asarray(p, dtype=float).reshape(-1, 2) for p in polygons]
         self._count = len(polys)
@@ -42,6 +45,12 @@ class PolygonSet:
         self._owner = np.repeat(np.arange(self._count), sizes)
         self._lo = np.array([p.min(axis=0) for p in polys]).reshape(-1, 2)
         self._hi = np.array([p.max(axis=0) for p in polys]).reshape(-1, 2)
+        # What does not depend on the query point, once per set (per edge, elementwise:
+        # the same values as computed for any subset of the edges).
+        self._ab = self._b - self._a
+        self._len2 = np.einsum('ij,ij->i', self._ab, self._ab)
+        self._starts = np.concatenate(([0], np.cumsum(sizes)[:-1])).astype(np.intp)
+        self._all = np.arange(self._count)
 
     def __len__(self) -> int:
         return self._count
@@ -61,27 +70,32 @@ class PolygonSet:
         idx = np.asarray(indices, dtype=np.intp).reshape(-1)
         if idx.size == 0:
             return np.zeros(0)
+        if idx.size == self._count and np.array_equal(idx, self._all):
+            return self._signed(p, slice(None), self._starts)  # every polygon, in order
         chosen = np.zeros(self._count, dtype=bool)
         chosen[idx] = True
         e = np.flatnonzero(chosen[self._owner])     # edges, grouped by ascending owner
-        a, b = self._a[e], self._b[e]
-        ab = b - a
+        owner = self._owner[e]
+        starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
+        signed = self._signed(p, e, starts)
+        return signed[np.searchsorted(owner[starts], idx)]
+
+    def _signed(self, p: np.ndarray, e: npt.NDArray[np.intp] | slice,
+                starts: np.ndarray) -> np.ndarray:
+        """Signed distances to the polygons whose edges ``e`` begin at ``starts`` in ``e``."""
+        a, ab, len2 = self._a[e], self._ab[e], self._len2[e]
         ap = p - a
-        len2 = np.einsum('ij,ij->i', ab, ab)
         with np.errstate(divide='ignore', invalid='ignore'):
             s = np.where(len2 > 0.0, np.einsum('ij,ij->i', ap, ab) / len2, 0.0)
         diff = ap - np.clip(s, 0.0, 1.0)[:, None] * ab
         d2 = np.einsum('ij,ij->i', diff, diff)
-        owner = self._owner[e]
-        starts = np.flatnonzero(np.r_[True, owner[1:] != owner[:-1]])
         dist = np.sqrt(np.minimum.reduceat(d2, starts))
         # Crossing number of a ray to +x, without division (as ObstacleMap.point_free).
-        ay, by = a[:, 1], b[:, 1]
+        ay, by = a[:, 1], self._b[e][:, 1]
         cross = ab[:, 0] * ap[:, 1] - ab[:, 1] * ap[:, 0]
         left = ((ay > p[1]) != (by > p[1])) & ((cross > 0.0) == (by > ay))
         inside = np.add.reduceat(left.astype(np.intp), starts) % 2 == 1
-        signed = np.where(inside, -dist, dist)
-        return signed[np.searchsorted(owner[starts], idx)]
+        return np.where(inside, -dist, dist)
 
     def nearest(self, point: npt.ArrayLike) -> tuple[float, int]:
         """Signed distance (m) to the nearest polygon and its index; (inf, -1) if there is none.
@@ -92,6 +106,11 @@ class PolygonSet:
         """
         if self._count == 0:
             return math.inf, -1
+        if self._count <= self.SMALL:
+            # Few polygons: the exact distance to all of them costs less than the pruning.
+            distances = self.signed_distances(point, self._all)
+            j = int(np.argmin(distances))
+            return float(distances[j]), j
         lower = self.box_distances(point)
         first = int(np.argmin(lower))
         near = lower <= max(float(self.signed_distances(point, [first])[0]), 0.0)
@@ -103,6 +122,8 @@ class PolygonSet:
 
     def within(self, point: npt.ArrayLike, radius: float) -> np.ndarray:
         """Indices (ascending) of the polygons that meet the closed disc."""
+        if self._count <= self.SMALL:
+            return np.flatnonzero(self.signed_distances(point, self._all) <= radius)
         candidates = np.flatnonzero(self.box_distances(point) <= radius)
         return candidates[self.signed_distances(point, candidates) <= radius]
 

@@ -72,6 +72,27 @@ def test_within_is_the_set_of_polygons_meeting_the_closed_disc():
         PolygonSet([ELL[:2]])
 
 
+def test_small_sets_answer_as_the_pruned_search_bit_for_bit(monkeypatch):
+    # Up to PolygonSet.SMALL polygons every one is tested; the answers (values to the last
+    # bit, indices) are those of the search that prunes by bounding box, and shapely's.
+    rng = np.random.default_rng(4)
+    scenes = [random_scene(rng, count)[-count - 1:] for count in (0, 1, 3, 8, 11)]
+    points = rng.uniform(-22, 22, (150, 2))
+    assert all(len(s) <= PolygonSet.SMALL for s in scenes)
+    answers = []
+    for small in (PolygonSet.SMALL, 0):
+        monkeypatch.setattr(PolygonSet, 'SMALL', small)
+        answers.append([(pset.nearest(p), pset.within(p, 4.0).tolist(),
+                         pset.signed_distances(p, np.arange(len(pset))).tobytes(),
+                         pset.signed_distances(p, np.arange(len(pset))[::-1]).tobytes())
+                        for pset in map(PolygonSet, scenes) for p in points])
+    assert answers[0] == answers[1]
+    for point, ((value, index), *_) in zip(points, answers[0][-len(points):]):
+        want = [shapely_signed(point, poly) for poly in scenes[-1]]
+        assert value == pytest.approx(min(want), abs=1e-9)
+        assert want[index] == pytest.approx(value, abs=1e-9)
+
+
 class Item:
     def __init__(self, polygon):
         self.polygon = polygon

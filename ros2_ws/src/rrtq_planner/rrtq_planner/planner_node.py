@@ -31,7 +31,7 @@ from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import RunConfig
-from rrtq_planner.conversions import reference_msg, stats_msg, tree_msg
+from rrtq_planner.conversions import reference_msg, stats_msg, tree_bytes
 from rrtq_planner.guidance import GuidanceConfig, GuidanceMode, GuidanceSession
 from rrtq_planner.session import Budget, PlannerConfig, PlannerSession
 
@@ -106,7 +106,7 @@ class PlannerNode(Node):
         self.gate.answered(step.stamp_ns, stats, reference)
         self._publish(stats, reference)
         if done.tree is not None:
-            self.tree_pub.publish(tree_msg(step.stamp_ns, done.tree))
+            self.tree_pub.publish(tree_bytes(step.stamp_ns, done.tree))
 
 
     def _publish(self, stats: PlannerStats, reference: GuidanceReference | None = None) -> None:
