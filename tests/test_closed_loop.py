@@ -90,6 +90,8 @@ def test_walled_in_goal_fails_at_its_duration_with_a_reason(tmp_path):
     assert 'no path to the goal' in summary['reason']
     data = read_run(out / 'run.mcap')
     assert data.odom_t[-1] == pytest.approx(15.0)
-    assert summary['no_path_since_s'] < 10.0     # cut off, then held for the rest
+    # cut off once the ring is seen whole (its far walls are behind its near ones: about 12 s
+    # in), then held for the rest
+    assert summary['no_path_since_s'] < 13.0
     # The robot holds once the goal is cut off: it ends at rest, outside the ring.
     assert abs(data.odom_x[-1, 2]) + abs(data.odom_x[-1, 3]) < 0.2

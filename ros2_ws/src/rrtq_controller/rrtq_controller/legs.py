@@ -8,7 +8,6 @@ D <= ρ D0 the current state becomes the next leg's initial state.
 
 from __future__ import annotations
 
-import dataclasses
 import enum
 from dataclasses import dataclass
 
@@ -28,9 +27,10 @@ class LegEvent(enum.Enum):
     """The window of the last waypoint was entered; the leg continues (station keeping)."""
     NO_PLAN = 'no_plan'
     RENEWED = 'renewed'
-    """Station keeping on the last waypoint ran through its horizon: the same leg goes on
-    with a fresh horizon (receding), since past it the finite-horizon gain K(0) holds no
-    position (R⁻¹BᵀP(T): velocity only) and the learned one is unidentified there."""
+    """Station keeping on the last waypoint ran through its horizon: a new leg to the same
+    target starts with a fresh horizon (receding; the goal stays reached), since past it
+    the finite-horizon gain K(0) holds no position (R⁻¹BᵀP(T): velocity only) and the
+    learned one is unidentified there."""
 
 
 @dataclass(frozen=True)
@@ -137,8 +137,7 @@ class LegSequencer:
         last = self._next >= len(self._waypoints) - 1
         self.completed = False
         if self.goal_reached and last and t - self.leg.start_time >= self.horizon:
-            self.leg = dataclasses.replace(self.leg, start_time=float(t), x0=x.copy(),
-                                           d0=self.distance(x))
+            self._start(x, t)              # the same target: a new leg index, as in the report
             return LegEvent.RENEWED
         if inside and not last:
             self.completed = self.leg.d0 > self.skip_radius   # a leg of no length proves nothing

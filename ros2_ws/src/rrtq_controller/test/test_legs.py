@@ -23,10 +23,10 @@ def test_goal_and_horizon_restart_and_new_plan():
     assert seq.update(np.array([0.5, 0.0, 0.0, 0.0]), 10.0) is LegEvent.NEW_LEG  # T elapsed
     assert seq.leg is not None and np.isclose(seq.leg.d0, 0.5)
     assert seq.update(np.array([0.96, 0.0, 0.0, 0.0]), 11.0) is LegEvent.GOAL_REACHED
-    # station keeping through the leg's horizon (started at 10 s): the same leg, a fresh horizon
+    # station keeping through the leg's horizon (started at 10 s): the same target, a fresh horizon
     assert seq.update(np.array([0.96, 0.0, 0.0, 0.0]), 20.0) is LegEvent.RENEWED
-    assert seq.leg.index == 1 and seq.leg.start_time == 20.0 and np.isclose(seq.leg.d0, 0.04)
+    assert seq.leg.index == 2 and seq.leg.start_time == 20.0 and np.isclose(seq.leg.d0, 0.04)
     assert seq.update(np.array([0.96, 0.0, 0.0, 0.0]), 29.0) is LegEvent.CONTINUE
     assert seq.update(np.array([0.96, 0.0, 0.0, 0.0]), 30.0) is LegEvent.RENEWED
     leg = seq.set_plan([[5.0, 5.0]], np.array([0.96, 0.0, 0.1, 0.0]), 31.0)
-    assert leg is not None and leg.index == 2 and not seq.goal_reached
+    assert leg is not None and leg.index == 4 and not seq.goal_reached
