@@ -205,13 +205,13 @@ class ControllerConfig:
     """The gain may grow by this factor per adoption (1: double), from a floor set by the
     probing scale (see :meth:`QLearningController.policy_improvement`); a longer step is
     shortened to that length."""
-    divergence_distance: float = setting(1.5, **_POSITIVE, doc='guard: a leg diverges when D '
+    divergence_distance: float = setting(2.0, **_POSITIVE, doc='guard: a leg diverges when D '
                                          '> divergence_distance D0 + divergence_floor')
     divergence_floor: float = setting(1.0, low=0.0, doc='guard: state units (m, m/s) added '
                                       'to both divergence bounds')
     """So that a leg that starts at its target (D0 ≈ 0: holding station) is not declared
     diverged by probing alone."""
-    divergence_speed: float = setting(3.0, **_POSITIVE, doc='guard: a leg also diverges when '
+    divergence_speed: float = setting(4.0, **_POSITIVE, doc='guard: a leg also diverges when '
                                       'the speed exceeds divergence_speed (L + |v0| T) / T '
                                       '+ divergence_floor (L the leg length, v0 its initial '
                                       'velocity)')
