@@ -203,10 +203,7 @@ class LearningDriver(Driver):
                         moved=self._moved(before))
         elif event is LegEvent.RENEWED:
             c.renew_horizon(self.legs.x_bar(x), t)
-        elif (event is LegEvent.GOAL_REACHED and self.legs.leg is not None
-              and self.legs.leg.d0 > self.legs.skip_radius):
-            # a leg to where the robot already is (the hold before the first path, or
-            # while there is none) proves nothing about the policy
+        elif event is LegEvent.GOAL_REACHED and self.legs.completed:
             c.completed_leg()
         u = c.step(t, self.legs.x_bar(x),
                    None if d_applied is None else np.asarray(d_applied, dtype=float))

@@ -73,8 +73,10 @@ class LegSequencer:
         self._count = -1
         self.goal_reached = False
         self.completed = False
-        """Whether the last :meth:`update` started a new leg because the previous one
-        entered its window (not a horizon restart, not a new plan)."""
+        """Whether the last :meth:`update` found the leg in its window (a new leg to the
+        next waypoint, or the goal reached; not a horizon restart, not a new plan), from a
+        start away from its target: a leg of no length (a hold where the robot already
+        is) proves nothing about the policy."""
 
     def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> Leg | None:
         """Adopt a new plan; a new leg starts from the current state x at time t (s)."""
@@ -140,12 +142,13 @@ class LegSequencer:
             self._start(x, t)              # the same target: a new leg index, as in the report
             return LegEvent.RENEWED
         if inside and not last:
-            self.completed = self.leg.d0 > self.skip_radius   # a leg of no length proves nothing
+            self.completed = self.leg.d0 > self.skip_radius
             self._next += 1
             self._start(x, t)
             return LegEvent.NEW_LEG
         if inside and last:
             if not self.goal_reached:
+                self.completed = self.leg.d0 > self.skip_radius
                 self.goal_reached = True
                 return LegEvent.GOAL_REACHED
             return LegEvent.CONTINUE
