@@ -25,6 +25,7 @@ random part takes the largest eigenvalue of the position covariance.
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 
 import numpy as np
 import numpy.typing as npt
@@ -46,8 +47,15 @@ def _directions(count: int) -> np.ndarray:
 
 def _projected_sums(a: np.ndarray, s: np.ndarray, c: np.ndarray) -> np.ndarray:
     """Σ_{j<k} Σ_i s_i |cᵀPΨ(k, j+1)e_i| for k = 1..N and each row c of ``c``: (N, D)."""
+    out = np.zeros((a.shape[0], len(c)))
+    for k, proj in enumerate(_projections(a, c)):
+        out[k] = (np.abs(proj) @ s).sum(axis=0)
+    return out
+
+
+def _projections(a: np.ndarray, c: np.ndarray) -> Iterator[np.ndarray]:
+    """cᵀPΨ(k+1, j+1) for j = 0..k, as a (k+1, D, n) array, for k = 0..N-1 in turn."""
     N, n = a.shape[0], a.shape[1]
-    out = np.zeros((N, len(c)))
     # At iteration k, blocks = [Ψ(k+1, 1), ..., Ψ(k+1, k+1) = I]; Ψ(k+1, j+1) = A_k Ψ(k, j+1)
     # multiplies on the left, so whole blocks are kept, not just their position rows.
     # Kept right-aligned in one array: at iteration k, blocks[N-1-k:] (oldest first).
@@ -57,9 +65,7 @@ def _projected_sums(a: np.ndarray, s: np.ndarray, c: np.ndarray) -> np.ndarray:
         if k:
             blocks[N - 1 - k:N - 1] = a[k] @ blocks[N - k:]
             blocks[N - 1] = np.eye(n)
-        proj = c @ blocks[N - 1 - k:, :2, :]                            # cᵀPΨ, (k+1, D, n)
-        out[k] = (np.abs(proj) @ s).sum(axis=0)
-    return out
+        yield c @ blocks[N - 1 - k:, :2, :]
 
 
 def leg_tube_terms(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray,
@@ -76,18 +82,12 @@ def leg_tube_terms(phi: np.ndarray, gamma: np.ndarray, gains: np.ndarray,
     """
     s = np.asarray(shape, dtype=float)
     a = closed_loop(phi, gamma, gains)
-    N, n = a.shape[0], a.shape[1]
+    N = a.shape[0]
     c = _directions(directions)
     if normal is not None:
         c = np.vstack([c, np.asarray(normal, dtype=float).reshape(1, 2)])
     terms = np.zeros((N, N, len(c)))
-    blocks = np.empty((N, n, n))
-    blocks[N - 1] = np.eye(n)
-    for k in range(N):
-        if k:
-            blocks[N - 1 - k:N - 1] = a[k] @ blocks[N - k:]
-            blocks[N - 1] = np.eye(n)
-        proj = c @ blocks[N - 1 - k:, :2, :]                            # (k+1, D, n), j = 0..k
+    for k, proj in enumerate(_projections(a, c)):
         terms[k, :k + 1] = np.abs(proj) @ s
     along = terms[:, :, directions] if normal is not None else np.zeros((N, N))
     return terms[:, :, :directions], along
