@@ -32,7 +32,7 @@ from common import RESULTS, ROOT, save
 from vf_lpc_bench import reference_lateral
 
 from rrtq_bringup.report import report
-from rrtq_bringup.report_vf_lpc import vf_lpc_series
+from rrtq_bringup.report_vf_lpc import plot_prediction_error, vf_lpc_series
 from rrtq_bringup.run_data import read_run
 
 matplotlib.use('Agg')
@@ -81,13 +81,7 @@ def figure(where: pathlib.Path, path: pathlib.Path) -> None:
             d = np.asarray(data.dist_d, dtype=float).reshape(len(data.dist_t), -1)
             axes[1].plot(data.dist_t, np.hypot(d[:, 0], d[:, 1]), lw=0.8, color='k')
             for ax, j, name in ((axes[2], 2, '$v_x$'), (axes[3], 3, '$v_y$')):
-                t, err, band = s['t_pred'], s['learned_error'][:, j], 2.0 * s['std'][:, j]
-                ax.fill_between(t, -band, band, color='tab:blue', alpha=0.2, label='GP 2σ')
-                ax.plot(t, s['nominal_error'][:, j], lw=0.7, color='tab:red',
-                        label='nominal model (40 kg)')
-                ax.plot(t, err, lw=0.7, color='tab:blue', label='nominal + GP mean')
-                ax.set_ylabel(f'{name} one-step\nerror [m/s]')
-                ax.legend(loc='upper right', fontsize=8)
+                plot_prediction_error(ax, s, j, name, 'nominal model (40 kg)')
     axes[0].set_ylabel('tracking error [m]')
     axes[0].legend(loc='upper right', fontsize=8)
     axes[1].set_ylabel('field |a(p)|\n[m/s²]')

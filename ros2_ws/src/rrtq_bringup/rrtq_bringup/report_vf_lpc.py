@@ -104,6 +104,18 @@ def vf_lpc_summary(data: RunData, scenario: dict) -> dict[str, Any]:
     return out
 
 
+def plot_prediction_error(ax: Any, s: dict[str, np.ndarray], j: int, name: str,
+                          nominal: str) -> None:
+    """One state's one-step prediction error: the nominal model's, with the GP, its 2σ band."""
+    if len(s['t_pred']):
+        t, err, band = s['t_pred'], s['learned_error'][:, j], 2.0 * s['std'][:, j]
+        ax.fill_between(t, -band, band, color='tab:blue', alpha=0.2, label='GP 2σ')
+        ax.plot(t, s['nominal_error'][:, j], lw=0.7, color='tab:red', label=nominal)
+        ax.plot(t, err, lw=0.7, color='tab:blue', label='nominal + GP mean')
+    ax.set_ylabel(f'{name} one-step\nerror [m/s]')
+    ax.legend(loc='upper right', fontsize=8)
+
+
 def plot_vf_lpc(data: RunData, path: pathlib.Path) -> None:
     """``vf_lpc.png``: tracking error, velocity prediction errors with the 2σ band, GP size."""
     s = vf_lpc_series(data)
@@ -111,14 +123,7 @@ def plot_vf_lpc(data: RunData, path: pathlib.Path) -> None:
     axes[0].plot(s['t'], s['tracking'], lw=0.8)
     axes[0].set_ylabel('tracking error [m]')
     for ax, j, name in ((axes[1], 2, '$v_x$'), (axes[2], 3, '$v_y$')):
-        if len(s['t_pred']):
-            t, err, band = s['t_pred'], s['learned_error'][:, j], 2.0 * s['std'][:, j]
-            ax.fill_between(t, -band, band, color='tab:blue', alpha=0.2, label='GP 2σ')
-            ax.plot(t, s['nominal_error'][:, j], lw=0.7, color='tab:red',
-                    label='nominal model')
-            ax.plot(t, err, lw=0.7, color='tab:blue', label='nominal + GP mean')
-        ax.set_ylabel(f'{name} one-step\nerror [m/s]')
-        ax.legend(loc='upper right', fontsize=8)
+        plot_prediction_error(ax, s, j, name, 'nominal model')
     axes[3].plot(s['t'], s['dictionary'], lw=0.8)
     axes[3].set_ylabel('GP dictionary')
     axes[3].set_xlabel('sim time [s]')
