@@ -45,6 +45,16 @@ class CriticLaw(enum.StrEnum):
     """Recursive, exponentially weighted least squares over the same errors e_c1, e_c2."""
 
 
+class SafeHold(enum.StrEnum):
+    """What a leg holds when it diverged and no policy has completed a leg (the guard)."""
+
+    BRAKE = 'brake'
+    """A bounded force against the measured velocity, adapted on line (:class:`guard.Brake`)."""
+
+    INITIAL = 'initial'
+    """The initial policy (``initial_gain``; the zero gain when none is given)."""
+
+
 class ActorLaw(enum.StrEnum):
     """How the actors follow the critic's greedy policy."""
 
@@ -215,6 +225,13 @@ class ControllerConfig:
                                       'the speed exceeds divergence_speed (L + |v0| T) / T '
                                       '+ divergence_floor (L the leg length, v0 its initial '
                                       'velocity)')
+    safe_hold: SafeHold = setting(SafeHold.BRAKE, doc='guard: what a leg that diverged before '
+                                  'any policy completed a leg holds: brake | initial')
+    """The initial policy is the zero gain unless ``initial_gain`` is given, and a lightly
+    damped robot coasts on under it (:class:`guard.Brake`)."""
+    hold_stop_time: float = setting(1.0, unit='s', **_POSITIVE, doc='guard: the brake doubles '
+                                    'its force while the speed falls slower than to stop '
+                                    'within this time')
     forces: tuple[tuple[float, float, float], ...] = setting(
         (), columns=3, doc='open_loop: the force profile, rows [t (s), f_x (N), f_y (N)], '
         'piecewise constant from each t')

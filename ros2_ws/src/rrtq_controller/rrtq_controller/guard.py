@@ -35,7 +35,7 @@ class PolicyEvent(enum.Enum):
     REVERTED = 'reverted'
     """A leg diverged: the actors are back at the last policy that completed a leg."""
     HOLD = 'hold'
-    """A leg diverged before any policy completed a leg: back at the initial policy."""
+    """A leg diverged before any policy completed a leg: the safe hold (:class:`Brake`)."""
 
 
 def trust_step(change: Array, current: Array, floor: float, growth: float) -> float:
@@ -147,3 +147,58 @@ class DivergenceWatch:
             self.tripped = True
             return f'speed {v:.3g} > {self.speed_bound:.3g} (bound from the leg length and T)'
         return ''
+
+
+@dataclass
+class Brake:
+    """The safe hold: a bounded force against the measured velocity, adapted on line.
+
+    Where no policy has completed a leg there is no policy known to work, and the initial
+    policy is no safe hold when it is the zero gain: a lightly damped robot (110 kg,
+    15 kg/s: a 7 s time constant) coasts on at the speed that tripped the watch, into
+    whatever lies ahead. The brake commands u = -F v / |v| with v = x̄[2:4], the velocity
+    of the position (the state layout the watch's speed bound already uses), and adapts
+    the force F from what the last step did, with no model of the plant:
+
+    * F starts at ``start_force`` (the probing scale: a force the robot has already been
+      pushed with), capped at ``limit``;
+    * when the speed did not fall by at least |v| Δt / ``stop_time`` over the last step
+      (braking too weakly to stop within ``stop_time``), F doubles, up to ``limit``;
+    * when the velocity reversed (v · v_prev < 0: the step overshot rest), F halves.
+
+    Every command is within ``limit`` per axis (|u_i| <= F <= limit). The brake removes
+    kinetic energy wherever a force along -v decelerates the robot (vᵀ B_v v > 0 for the
+    velocity rows B_v of B, as on the rover family, B_v = I/m); overshooting rest in one
+    step halves F, so F falls geometrically until a step no longer overshoots. Below
+    ``rest_speed`` the force is proportional to the speed (no full push in the direction
+    of sensor noise). Beyond the papers, like the rest of this module.
+    """
+
+    limit: float
+    start_force: float
+    stop_time: float
+    dt: float
+    rest_speed: float = 0.05
+    force: float = 0.0
+    prev: Array | None = None
+
+    def start(self) -> None:
+        """A new hold: the force from its start value, no previous velocity."""
+        self.force = min(self.start_force, self.limit)
+        self.prev = None
+
+    def __call__(self, x: Array, m: int) -> Array:
+        """The braking force (m,) for the state x̄; zero when x̄ has no velocity part."""
+        x = np.asarray(x, dtype=float)
+        if x.size < 2 + m:
+            return np.zeros(m)
+        v = x[2:2 + m]
+        speed = float(np.linalg.norm(v))
+        if self.prev is not None:
+            before = float(np.linalg.norm(self.prev))
+            if float(v @ self.prev) < 0.0:
+                self.force *= 0.5
+            elif speed > self.rest_speed and speed > before * (1.0 - self.dt / self.stop_time):
+                self.force = min(2.0 * self.force, self.limit)
+        self.prev = v.copy()
+        return np.asarray(-self.force * v / max(speed, self.rest_speed), dtype=float)

@@ -27,9 +27,9 @@ from numpy.typing import NDArray
 
 from .basis import QuadraticBasis, TimeBasis
 from .bellman import Policy, bellman_rows
-from .config import ActorLaw, ControllerConfig, StepInfo, Variant
+from .config import ActorLaw, ControllerConfig, SafeHold, StepInfo, Variant
 from .critic import LeastSquaresCritic, fit, make_critic, residual
-from .guard import DivergenceWatch, PolicyEvent, held_below, trust_step
+from .guard import Brake, DivergenceWatch, PolicyEvent, held_below, trust_step
 from .probing import Probing
 from .readout import WeightReadout, _features
 from .stability import gain_warnings
@@ -85,6 +85,9 @@ class QLearningController(WeightReadout):
         self._watch = DivergenceWatch(c.divergence_distance, c.divergence_floor,
                                       c.divergence_speed, c.horizon)
         self._held = False
+        self._brake = Brake(c.force_limit, 2.0 * c.probing_std, c.hold_stop_time, c.dt)
+        self._braking = False
+        """Whether this leg is in the safe hold's brake (a HOLD with ``safe_hold: brake``)."""
         self._events: list[tuple[PolicyEvent, str]] = []
         self.event_counts = {e: 0 for e in PolicyEvent}
         """How often each :class:`guard.PolicyEvent` happened."""
@@ -136,19 +139,20 @@ class QLearningController(WeightReadout):
         self._prev = None
         self._watch.start(np.asarray(x0_bar, dtype=float), renew,
                           None if moved is None else np.asarray(moved, dtype=float))
-        self._held = False
+        self._held = self._braking = False
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
 
     def renew_horizon(self, x0_bar: Array, t: float) -> None:
         """Keep station on a reached target with a fresh horizon from time t (s).
 
         The same leg goes on as a new finite-horizon problem from x̄0 (receding horizon):
-        τ restarts at T, the divergence watch takes x̄0 as its reference; no leg is
-        counted (no policy evaluation, no probing decay, no widening of the time basis).
+        τ restarts at T, the divergence watch takes x̄0 as its reference, a hold ends;
+        no leg is counted (no policy evaluation, no probing decay, no widening of the time basis).
         """
         self._t0 = float(t)
         self._prev = None
         self._watch.start(np.asarray(x0_bar, dtype=float))
+        self._held = self._braking = False
 
     def completed_leg(self) -> None:
         """Mark the current leg as completed (it entered its window).
@@ -208,7 +212,11 @@ class QLearningController(WeightReadout):
                 e_d = self.disturbance_actor_update(phi, x, self._target[1])
         noise = self._probing_u.sample(self.probing_std)
         limit = self.config.force_limit
-        u = np.clip(self._policy_u(phi, x) + noise, -limit, limit)
+        if self._braking:
+            noise = np.zeros(self.m)
+            u = np.clip(self._brake(x, self.m), -limit, limit)
+        else:
+            u = np.clip(self._policy_u(phi, x) + noise, -limit, limit)
         if self.robust:
             d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.leg_index
             self._noise_d = self._probing_d.sample(d_std)
@@ -368,7 +376,10 @@ class QLearningController(WeightReadout):
         that diverged (in a direction its completed legs never went), and the hold is
         the initial policy instead. The actors and their target both jump there and stay
         for the rest of the leg; the data of the diverged leg stay in the critic's
-        window (they are valid rows for any policy).
+        window (they are valid rows for any policy). A hold to the initial policy brakes
+        instead with ``safe_hold: brake`` (the default; :class:`guard.Brake`, starting
+        from the probing scale or the RMS force of the stored data): the robot is stopped
+        where it is, and the initial policy takes over again at the next leg.
         """
         if self._completed is not None and not self._adopted_since:
             self._completed = None
@@ -377,6 +388,13 @@ class QLearningController(WeightReadout):
         self._Wa, self._Wd = Wa.copy(), Wd.copy()
         self._target = (Wa.copy(), Wd.copy())
         self._held = True
+        if event is PolicyEvent.HOLD and self.config.safe_hold is SafeHold.BRAKE:
+            self._braking = True
+            _, _, _, _, u_applied, _ = self.critic.window.samples()
+            pushed = float(np.sqrt(np.mean(u_applied ** 2))) if len(u_applied) else 0.0
+            self._brake.start_force = max(2.0 * self.config.probing_std, pushed, 1.0)
+            self._brake.start()
+            reason += '; braking'
         self._note(event, 'leg diverged: ' + reason)
 
     def _note(self, event: PolicyEvent, reason: str) -> None:

@@ -6,8 +6,10 @@ controller never sees.
 
 import numpy as np
 
-from rrtq_controller.config import ControllerConfig
-from rrtq_controller.guard import DivergenceWatch, PolicyEvent, held_below, trust_step
+import pytest
+
+from rrtq_controller.config import ControllerConfig, SafeHold
+from rrtq_controller.guard import Brake, DivergenceWatch, PolicyEvent, held_below, trust_step
 from rrtq_controller.q_learning import QLearningController
 from rrtq_testing import controller_reference as ref
 
@@ -209,3 +211,63 @@ def test_a_new_plan_to_a_farther_waypoint_is_not_a_robot_running_away():
     unknown.start(np.array([-1.1, 0.0, 0.0, 0.0]))
     unknown.start(x_new, renew=False)                          # not told: the old rule
     assert 'D =' in unknown.check(x_new)
+
+
+def _coast_after_hold(safe_hold, mass, damping, limit, v0=2.5, seconds=8.0):
+    """A leg whose first policy runs away before any policy completed a leg: the watch
+    trips and holds. Returns (distance travelled after the hold, largest |u|, speeds)."""
+    A, B = ref.rover(mass=mass, stiffness=0.0, damping=damping)
+    plant = ref.Plant(A, B, DT)
+    cfg = ControllerConfig(force_limit=limit, safe_hold=safe_hold, probing_std=20.0)
+    ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(3))
+    x = np.array([-2.0, 0.0, -v0, 0.0])      # already moving away from its target
+    ctrl.start_leg(x, 0.0)
+    ctrl.revert('test: forced')               # as if the watch had tripped
+    start, umax, speeds = x[:2].copy(), 0.0, []
+    for k in range(int(seconds / DT)):
+        u = ctrl.step(k * DT, x)
+        umax = max(umax, float(np.abs(u).max()))
+        x = plant.step(x, u)
+        speeds.append(float(np.linalg.norm(x[2:])))
+    return float(np.linalg.norm(x[:2] - start)), umax, np.array(speeds)
+
+
+def test_the_safe_hold_brakes_a_lightly_damped_robot_to_rest_within_the_limit():
+    """The defect it fixes: 110 kg at 15 kg/s (a 7 s time constant) held to the zero gain
+    coasts on for metres. The brake stops it within a few seconds, every command within
+    the actuator's 200 N, and it stays stopped."""
+    coast, _, _ = _coast_after_hold(SafeHold.INITIAL, 110.0, 15.0, 200.0)
+    braked, umax, speeds = _coast_after_hold(SafeHold.BRAKE, 110.0, 15.0, 200.0)
+    assert coast > 10.0                                        # the zero-gain hold coasts
+    v0, a_max = 2.5, 200.0 / 110.0
+    assert braked < 3.0 * v0 ** 2 / (2 * a_max)                # near the braking distance
+    assert umax <= 200.0
+    assert speeds[int(4.0 / DT):].max() < 0.05                 # at rest after 4 s
+
+
+@pytest.mark.parametrize('mass, damping, limit', [(10.0, 5.0, 5000.0), (120.0, 80.0, np.inf),
+                                                  (40.0, 45.0, 1000.0)])
+def test_the_brake_never_speeds_the_robot_up_and_settles_on_any_rover(mass, damping, limit):
+    """Light robots with strong actuators (one step at the limit would throw a 10 kg robot
+    at 25 m/s the other way) and heavy ones without a limit: the brake's force adapts
+    from what each step did, the speed never exceeds where it started, and the robot
+    comes to rest."""
+    _, umax, speeds = _coast_after_hold(SafeHold.BRAKE, mass, damping, limit)
+    assert speeds.max() <= 2.5 + 1e-9
+    assert speeds[-20:].max() < 0.05
+    assert umax <= limit
+
+
+def test_brake_force_halves_when_the_velocity_reverses_and_doubles_when_it_does_not_slow():
+    b = Brake(limit=100.0, start_force=10.0, stop_time=1.0, dt=DT)
+    b.start()
+    b(np.array([0, 0, 1.0, 0]), 2)
+    b(np.array([0, 0, 1.0, 0]), 2)             # did not slow: stronger
+    assert b.force == 20.0
+    b(np.array([0, 0, -0.5, 0]), 2)            # overshot rest: weaker
+    assert b.force == 10.0
+    u = b(np.array([0, 0, -0.24, 0.32]), 2)    # slowing fast enough: unchanged, against v
+    assert b.force == 10.0 and np.allclose(u, [6.0, -8.0])
+    for _ in range(10):
+        b(np.array([0, 0, 3.0, 0]), 2)
+    assert b.force == 100.0                    # never beyond the limit
