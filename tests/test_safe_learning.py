@@ -9,6 +9,11 @@ made the guard ask a positive-definite value of every early proposal and reject 
 55 s), and, with that mended, the critic's greedy gain below the times-to-go its samples
 covered was an extrapolation that pushed the robot away at the end of long legs
 (docs/design.md, Controller: coverage).
+
+The second scenario is a heavier rover with a lower force limit (110 kg, 15 kg/s: a 7 s
+time constant; 200 N), also from the defaults. Its early policies diverge before any
+completed a leg; a hold to the zero gain let it coast on (the run then ended with the goal
+cut off by the margin that coasting grew), and the hold now brakes (guard.Brake).
 """
 
 import pathlib
@@ -38,15 +43,45 @@ obstacles:
 """
 
 
-def test_a_defaults_only_scenario_learns_safely_and_reaches_its_goal(tmp_path):
-    path = tmp_path / 'defaults.yaml'
-    path.write_text(DEFAULTS_ONLY)
+HEAVY_LOW_LIMIT = """
+name: heavy-low-limit
+seed: 11
+bounds: {x: [-20, 20], y: [-20, 20]}
+start: [-16.0, 14.0]
+goal: [15.0, -14.0]
+plant: {model: rover, mass: 110.0, damping: 15.0, stiffness: 0.0, force_limit: 200.0}
+obstacles:
+  - {id: a, polygon: [[-9, 4], [-3, 4], [-3, 8], [-9, 8]], known: true}
+  - {id: b, circle: {center: [2, 0], radius: 3.0}}
+  - {id: c, polygon: [[6, -10], [9, -10], [9, -3], [6, -3]], appear_at: 25.0}
+  - {id: d, circle: {center: [-4, -6], radius: 2.5}, appear_at: 10.0}
+"""
+
+
+def _run(tmp_path, text):
+    path = tmp_path / 'scenario.yaml'
+    path.write_text(text)
     out = tmp_path / 'run'
     proc = subprocess.run([str(ROOT / 'scripts/rrtq'), 'run', str(path), '--out', str(out),
                            '--mode', 'composed'], capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     data = read_run(out / 'run.mcap')
-    judged = summarise(data, embedded_scenario(out / 'run.mcap'))
+    return out, data, summarise(data, embedded_scenario(out / 'run.mcap'))
+
+
+def test_a_heavier_rover_with_a_lower_limit_brakes_when_it_holds_and_reaches_its_goal(tmp_path):
+    out, data, judged = _run(tmp_path, HEAVY_LOW_LIMIT)
+    assert judged['time_to_goal_s'] is not None and judged['collided'] is False
+    assert data.force_limit == 200.0
+    assert np.abs(data.cmd_u).max() <= 200.0
+    holds = [reason for _, e, reason in data.policy_events if 'hold' in e.split(';')]
+    assert holds and all('braking' in reason for reason in holds)
+    table = summary(evaluate(out / 'run.mcap'))
+    assert table['median_ratio_last10'] <= 1.05, table['ratios_last10']
+
+
+def test_a_defaults_only_scenario_learns_safely_and_reaches_its_goal(tmp_path):
+    out, data, judged = _run(tmp_path, DEFAULTS_ONLY)
     assert judged['time_to_goal_s'] is not None and judged['collided'] is False
     # the controller knew the plant's limit (1000 N, the default) and never commanded beyond it
     assert data.force_limit == 1000.0

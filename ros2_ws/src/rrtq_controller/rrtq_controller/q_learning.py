@@ -394,7 +394,7 @@ class QLearningController(WeightReadout):
             pushed = float(np.sqrt(np.mean(u_applied ** 2))) if len(u_applied) else 0.0
             self._brake.start_force = max(2.0 * self.config.probing_std, pushed, 1.0)
             self._brake.start()
-            reason += '; braking'
+            reason += ', braking'
         self._note(event, 'leg diverged: ' + reason)
 
     def _note(self, event: PolicyEvent, reason: str) -> None:
