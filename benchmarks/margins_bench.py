@@ -4,7 +4,9 @@ Reads each run's recording (``RUNS/cfg-NN/seed-NNN/run.mcap``) and summary: outc
 goal, path / optimum (the bench's layout optimum), the mean margin over the run (m, robot
 radius excluded), and the legs whose largest deviation exceeded the margin in force at
 their start (``/safety/status.violations``), as a rate against δ with its 95 %
-Clopper-Pearson interval over all the mode's legs.
+Clopper-Pearson interval over all the mode's legs. The coverage columns are the
+recording-only check (:mod:`rrtq_bringup.margin_coverage`): each leg's deviation recomputed
+from ``/odom`` and the controller's leg, against the least margin published while it ran.
 
     python benchmarks/margins_bench.py NAME RUNS [RUNS ...]
 
@@ -25,6 +27,7 @@ from mcap_ros2.decoder import DecoderFactory
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
 from common import save  # noqa: E402
+from rrtq_bringup.margin_coverage import coverage  # noqa: E402
 from rrtq_planner.margins.coverage import binomial_interval  # noqa: E402
 
 
@@ -43,6 +46,7 @@ def run_row(seed_dir: pathlib.Path) -> dict:
                    .get('robot_radius', 0.0))
     last = status[-1]
     margins = np.array([s.margin for s in status]) - radius
+    checked = coverage([seed_dir / 'run.mcap'])
     return {'seed': seed_dir.name, 'mode': last.margin_mode, 'outcome': summary['outcome'],
             'success': bool(summary['success']), 'collided': bool(summary['collided']),
             'time_to_goal_s': summary.get('time_to_goal_s'),
@@ -50,13 +54,15 @@ def run_row(seed_dir: pathlib.Path) -> dict:
                                   if summary['success'] else None),
             'mean_margin_m': float(margins.mean()), 'max_margin_m': float(margins.max()),
             'd_rob_max_m': float(last.d_rob_max), 'legs': int(last.legs),
-            'violations': int(last.violations), 'confidence': float(last.confidence)}
+            'violations': int(last.violations), 'confidence': float(last.confidence),
+            'checked_legs': len(checked.legs), 'checked_misses': checked.misses}
 
 
 def table(rows: list[dict]) -> str:
     lines = ['| mode | runs | goal | collisions | path / optimum (median) | mean margin (m) | '
-             'max D_rob (m) | legs | violations | rate [95 % interval] |',
-             '|---|---|---|---|---|---|---|---|---|---|']
+             'max D_rob (m) | legs | violations | rate [95 % interval] | '
+             'recording check: misses / legs, rate [95 %] |',
+             '|---|---|---|---|---|---|---|---|---|---|---|']
     for mode in dict.fromkeys(r['mode'] for r in rows):
         rs = [r for r in rows if r['mode'] == mode]
         legs, bad = sum(r['legs'] for r in rs), sum(r['violations'] for r in rs)
@@ -67,11 +73,14 @@ def table(rows: list[dict]) -> str:
         # it counts no violations.
         rate = (f'{bad / max(legs, 1):.3f} [{lo:.3f}, {hi:.3f}]' if mode != 'running_max'
                 else 'not counted')
+        cl, cb = sum(r['checked_legs'] for r in rs), sum(r['checked_misses'] for r in rs)
+        clo, chi = binomial_interval(cb, cl) if cl else (float('nan'),) * 2
+        check = f'{cb}/{cl}, {cb / max(cl, 1):.3f} [{clo:.3f}, {chi:.3f}]'
         lines.append(
             f"| {mode} | {len(rs)} | {sum(r['success'] for r in rs)}/{len(rs)} | "
             f"{sum(r['collided'] for r in rs)} | {ratio} | "
             f"{np.mean([r['mean_margin_m'] for r in rs]):.2f} | "
-            f"{max(r['d_rob_max_m'] for r in rs):.2f} | {legs} | {bad} | {rate} |")
+            f"{max(r['d_rob_max_m'] for r in rs):.2f} | {legs} | {bad} | {rate} | {check} |")
     return '\n'.join(lines)
 
 

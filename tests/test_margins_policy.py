@@ -81,7 +81,7 @@ def _mission(policy, steps=3000, seed=0):
 
 
 def test_learned_bound_covers_the_legs_and_the_field_on_a_true_plant():
-    config = LearnedBoundConfig(region=((-2.0, 14.0), (-2.0, 14.0)), dt=0.05)
+    config = LearnedBoundConfig(region=((-2.0, 14.0), (-2.0, 14.0)), dt=0.05, prior_bound=0.5)
     policy = LearnedBoundPolicy(config)
     rows, plant, field = _mission(policy)
     status = rows[-1][0]

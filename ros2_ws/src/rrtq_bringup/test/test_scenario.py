@@ -342,7 +342,7 @@ def test_safety_section_defaults_and_a_calibration_read_from_the_scenario_direct
     sc = parse()
     assert sc.margins.margin is MarginMode.RUNNING_MAX and sc.margins.confidence == 0.95
     assert sc.margins.window == 50 and sc.margins.initial_margin is None
-    assert sc.margins.prior_bound == 0.5
+    assert sc.margins.prior_bound == 0.1
     sc = parse(safety={'margin': 'learned_bound', 'prior_bound': 0.1})
     assert sc.margins.margin is MarginMode.LEARNED_BOUND and sc.margins.prior_bound == 0.1
     write_calibration(tmp_path / 'scores.json', Calibration((0.2, 0.4)))

@@ -130,3 +130,59 @@ def test_calibration_gives_a_finite_margin_from_the_first_leg_and_raises_at_once
     assert status[7].leg_margin == pytest.approx(0.6)
     assert status[-1].violations == 1
     assert policy.scores == pytest.approx([0.15, 0.6])
+
+
+def test_warm_up_legs_do_not_lower_the_adaptive_level():
+    # Without calibration the first ⌈1/δ⌉ − 1 = 19 legs run on the conservative start, not on
+    # a prediction of the quantile: they must not move δ_t (each would add ηδ, and after 19
+    # of them the quantile would turn finite at 13 scores, at the level 1 − δ_t ≈ 0.92).
+    policy = ConformalPolicy(ConformalConfig(adaptation=0.05))
+    status = _run_legs(policy, [[0.0, 0.3 - 0.001 * i] for i in range(21)])
+    first = [status[2 * k] for k in range(21)]
+    assert policy.quantile.delta_t == pytest.approx(0.05 + 0.05 * 0.05)   # leg 19 only
+    assert all(math.isinf(s.bound) for s in first[:19])
+    assert first[19].bound == pytest.approx(0.3) and first[19].confidence == pytest.approx(0.95)
+    assert first[19].leg_margin == pytest.approx(0.3)
+
+
+def _published_coverage(statuses):
+    """Per leg (by ``legs``): its largest ``d_rob`` against the least ``margin`` published."""
+    legs: dict[int, list[float]] = {}
+    for s in statuses:
+        row = legs.setdefault(s.legs, [0.0, math.inf])
+        row[0], row[1] = max(row[0], s.d_rob), min(row[1], s.margin)
+    return sum(d > m for d, m in legs.values()), len(legs)
+
+
+@pytest.mark.parametrize('eta', [0.0, 0.05])
+def test_published_margin_covers_exchangeable_legs_at_the_stated_rate(eta):
+    # What an outside check reads off /safety/status: per leg, the realised deviation against
+    # the least margin published while the leg ran (a margin raised during the leg does not
+    # cover it). With 19 calibration scores and 400 exchangeable legs, the miss rate must be
+    # compatible with δ (lower end of its 95 % interval <= δ) and not far below it either.
+    rng = np.random.default_rng(11)
+    draws = np.abs(rng.standard_normal(419))
+    policy = ConformalPolicy(ConformalConfig(adaptation=eta), calibration=draws[:19])
+    status = _run_legs(policy, [[0.0, 0.5 * x, x, 0.5 * x] for x in draws[19:]])
+    misses, legs = _published_coverage(status)
+    assert legs == 400 and misses == status[-1].violations
+    low, high = binomial_interval(misses, legs)
+    assert low <= 0.05 <= high + 0.02
+
+
+def test_drifting_legs_keep_the_published_coverage_only_with_the_adaptive_level():
+    # Leg deviations that double every 70 legs: judged from the published statuses, the
+    # plain window misses significantly more often than δ; the adaptive one, which learns
+    # from the misses of the published margin (the conservative start included, when δ_t
+    # has made the quantile infinite), stays within its guarantee.
+    rng = np.random.default_rng(5)
+    x = np.exp(0.01 * np.arange(1500)) * np.abs(rng.standard_normal(1500))
+    calibration = np.abs(rng.standard_normal(50))
+    rates = {}
+    for eta in (0.0, 0.05):
+        policy = ConformalPolicy(ConformalConfig(adaptation=eta), calibration=calibration)
+        misses, legs = _published_coverage(_run_legs(policy, [[0.0, v] for v in x]))
+        rates[eta] = (misses, legs)
+    assert binomial_interval(*rates[0.0], 0.99)[0] > 0.05
+    misses, legs = rates[0.05]
+    assert abs(misses / legs - 0.05) <= aci_miss_rate_bound(0.05, 0.05, legs)

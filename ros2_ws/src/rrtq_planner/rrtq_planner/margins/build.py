@@ -31,7 +31,7 @@ class MarginConfig:
                                       '(absolute path; conformal: its scores fill the window)')
     frame: ModelFrame = setting(ModelFrame.LEG_TARGET, doc='learned_bound: the one-step '
                                 "model's frame (plant.spring_anchor)")
-    prior_bound: float = setting(0.5, unit='m/s^2', low=0.0, low_open=True,
+    prior_bound: float = setting(0.1, unit='m/s^2', low=0.0, low_open=True,
                                  doc='learned_bound: R, the field strength assumed possible '
                                  'where the data say nothing (Jha\'s assumption 3.1)')
 
@@ -43,7 +43,7 @@ def make_policy(mode: MarginMode | str, *, region: Bounds, dt: float,
                 confidence: float = 0.95, window: int = 50,
                 initial_margin: float | None = None, calibration: Sequence[float] = (),
                 frame: ModelFrame | str = ModelFrame.LEG_TARGET,
-                n: int = 4, m: int = 2, prior_bound: float = 0.5,
+                n: int = 4, m: int = 2, prior_bound: float = 0.1,
                 robot_radius: float = 0.5) -> MarginPolicy:
     """The margin policy of ``mode``.
 

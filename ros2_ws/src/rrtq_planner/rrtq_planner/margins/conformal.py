@@ -113,15 +113,25 @@ class ConformalQuantile:
         return conformal_quantile(np.fromiter(self.scores, float, len(self.scores)),
                                   self.delta_t)
 
-    def observe(self, score: float, margin_used: float) -> bool:
+    @property
+    def warming_up(self) -> bool:
+        """Fewer scores than the plain quantile at δ needs (⌈1/δ⌉ − 1): no prediction yet."""
+        return len(self.scores) < minimum_scores(self.config.delta)
+
+    def observe(self, score: float, margin_used: float, adapt: bool = True) -> bool:
         """Account a finished leg: its score, and the margin that was in force for it.
 
         Returns True when the score exceeded that margin (a miss); the level δ_t then moves
-        by the adaptive step, and the score joins the window.
+        by the adaptive step (``adapt``), and the score joins the window. ``adapt=False``
+        for a leg of the warm-up (:attr:`warming_up` at its start): its margin was not this
+        quantile's prediction, and an infinite set's "coverage" must not buy the later
+        quantiles a lower level (δ_t would rise by ηδ per warm-up leg and the first finite
+        quantile come at 1 − δ_t < 1 − δ).
         """
         miss = bool(score > margin_used)
         self.legs += 1
         self.misses += miss
-        self.delta_t += self.config.adaptation * (self.config.delta - miss)
+        if adapt:
+            self.delta_t += self.config.adaptation * (self.config.delta - miss)
         self.scores.append(float(score))
         return miss

@@ -73,7 +73,7 @@ class LearnedBoundConfig:
     ridge: float = setting(1.0, low=0.0, low_open=True,
                            doc='lambda of the regression (the features are of order 1)')
     prior_bound: float = setting(
-        0.5, unit='m/s^2', low=0.0, low_open=True,
+        0.1, unit='m/s^2', low=0.0, low_open=True,
         doc='R: the field strength assumed possible before the data say otherwise (Jha\'s '
         'assumption 3.1); per component of the residual R dt on velocities, R dt^2/2 on '
         'positions')

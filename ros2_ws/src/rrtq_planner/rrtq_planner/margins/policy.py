@@ -227,6 +227,7 @@ class ConformalPolicy:
         self.quantile = ConformalQuantile(config, calibration)
         self.legs = LegTracker()
         self.leg_quantile = self.quantile.margin
+        self.leg_warmup = self.quantile.warming_up
         self.leg_margin = self._prediction()
         self.flagged = False
         self.misses = 0
@@ -244,12 +245,16 @@ class ConformalPolicy:
     def step(self, sample: MarginSample) -> MarginStatus:
         ended = self.legs.update(sample)
         if ended is not None:
-            # The adaptive level learns from the conformal quantile's own misses (an infinite
-            # quantile never misses); the violations count misses of the margin in force.
-            self.quantile.observe(ended, self.leg_quantile)
+            # The adaptive level learns from the misses of the margin in force (published),
+            # also when δ_t has made the quantile infinite and the conservative start stood
+            # in for it: then Gibbs & Candès' identity, miss rate = δ − (δ_T − δ_0)/(ηT),
+            # is about what the planner was given, not about an infinite set nobody used.
+            # Warm-up legs (too few scores for any level) do not move δ_t.
+            self.quantile.observe(ended, self.leg_margin, adapt=not self.leg_warmup)
             self.misses += ended > self.leg_margin
         if self.legs.new_leg:                  # the prediction for the leg that starts
             self.leg_quantile = self.quantile.margin
+            self.leg_warmup = self.quantile.warming_up
             self.leg_margin = self._prediction()
             self.flagged = False
         t = self.legs
