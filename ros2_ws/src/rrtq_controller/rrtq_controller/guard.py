@@ -160,8 +160,8 @@ class Brake:
     of the position (the state layout the watch's speed bound already uses), and adapts
     the force F from what the last step did, with no model of the plant:
 
-    * F starts at ``start_force`` (the probing scale: a force the robot has already been
-      pushed with), capped at ``limit``;
+    * F starts at the force :meth:`start` is given (the probing scale, or the forces the
+      robot has already been pushed with), capped at ``limit``;
     * when the speed did not fall by at least |v| Δt / ``stop_time`` over the last step
       (braking too weakly to stop within ``stop_time``), F doubles, up to ``limit``;
     * when the velocity reversed (v · v_prev < 0: the step overshot rest), F halves.
@@ -175,16 +175,15 @@ class Brake:
     """
 
     limit: float
-    start_force: float
     stop_time: float
     dt: float
     rest_speed: float = 0.05
     force: float = 0.0
     prev: Array | None = None
 
-    def start(self) -> None:
-        """A new hold: the force from its start value, no previous velocity."""
-        self.force = min(self.start_force, self.limit)
+    def start(self, force: float) -> None:
+        """A new hold from ``force`` (N), no previous velocity."""
+        self.force = min(force, self.limit)
         self.prev = None
 
     def __call__(self, x: Array, m: int) -> Array:

@@ -85,7 +85,7 @@ class QLearningController(WeightReadout):
         self._watch = DivergenceWatch(c.divergence_distance, c.divergence_floor,
                                       c.divergence_speed, c.horizon)
         self._held = False
-        self._brake = Brake(c.force_limit, 2.0 * c.probing_std, c.hold_stop_time, c.dt)
+        self._brake = Brake(c.force_limit, c.hold_stop_time, c.dt)
         self._braking = False
         """Whether this leg is in the safe hold's brake (a HOLD with ``safe_hold: brake``)."""
         self._events: list[tuple[PolicyEvent, str]] = []
@@ -392,8 +392,7 @@ class QLearningController(WeightReadout):
             self._braking = True
             _, _, _, _, u_applied, _ = self.critic.window.samples()
             pushed = float(np.sqrt(np.mean(u_applied ** 2))) if len(u_applied) else 0.0
-            self._brake.start_force = max(2.0 * self.config.probing_std, pushed, 1.0)
-            self._brake.start()
+            self._brake.start(max(2.0 * self.config.probing_std, pushed, 1.0))
             reason += ', braking'
         self._note(event, 'leg diverged: ' + reason)
 

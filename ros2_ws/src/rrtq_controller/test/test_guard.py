@@ -259,8 +259,8 @@ def test_the_brake_never_speeds_the_robot_up_and_settles_on_any_rover(mass, damp
 
 
 def test_brake_force_halves_when_the_velocity_reverses_and_doubles_when_it_does_not_slow():
-    b = Brake(limit=100.0, start_force=10.0, stop_time=1.0, dt=DT)
-    b.start()
+    b = Brake(limit=100.0, stop_time=1.0, dt=DT)
+    b.start(10.0)
     b(np.array([0, 0, 1.0, 0]), 2)
     b(np.array([0, 0, 1.0, 0]), 2)             # did not slow: stronger
     assert b.force == 20.0
