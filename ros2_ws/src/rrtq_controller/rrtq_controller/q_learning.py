@@ -333,7 +333,7 @@ class QLearningController(WeightReadout):
         Z = (self.time_basis.batch(tau0)[:, :, None] * x0[:, None, :]).reshape(len(x0), -1)
         # the floor of the trust region: the probing scale or the forces applied so far,
         # over the size of the states they were applied in (N per state unit)
-        force = max(2.0 * c.probing_std, float(np.sqrt(np.mean(u_applied ** 2))))
+        force = self._force_scale(u_applied)
         scale = float(np.sqrt(np.mean(np.sum(x0 ** 2, axis=1))))
         taus = np.linspace(0.0, c.horizon, 6)
         change = np.array([np.linalg.norm(self.gain(t, greedy_a) - self.gain(t, Wa)) for t in taus])
@@ -363,6 +363,15 @@ class QLearningController(WeightReadout):
             s *= 0.5
         self._note(PolicyEvent.REJECTED, f'proposal (step {2 * s:.3g}): {why}')
 
+    def _force_scale(self, u_applied: Array) -> float:
+        """N: the probing scale, or the RMS force applied in the stored data if larger.
+
+        The force the robot has already been pushed with: the trust region's floor and
+        the brake's first force.
+        """
+        pushed = float(np.sqrt(np.mean(u_applied ** 2))) if len(u_applied) else 0.0
+        return max(2.0 * self.config.probing_std, pushed)
+
     def _definite_value(self, theta: Array, Wa: Array, Wd: Array) -> bool:
         """Whether a policy's value kernel under a critic fit is positive definite on [T/2, T]."""
         taus = np.linspace(0.5 * self.config.horizon, self.config.horizon, 6)
@@ -390,9 +399,7 @@ class QLearningController(WeightReadout):
         self._held = True
         if event is PolicyEvent.HOLD and self.config.safe_hold is SafeHold.BRAKE:
             self._braking = True
-            _, _, _, _, u_applied, _ = self.critic.window.samples()
-            pushed = float(np.sqrt(np.mean(u_applied ** 2))) if len(u_applied) else 0.0
-            self._brake.start(max(2.0 * self.config.probing_std, pushed, 1.0))
+            self._brake.start(max(self._force_scale(self.critic.window.samples()[4]), 1.0))
             reason += ', braking'
         self._note(event, 'leg diverged: ' + reason)
 
