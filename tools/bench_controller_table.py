@@ -2,7 +2,7 @@
 
 For each seed's recording: the outcome (its summary.json), the median over the last ten
 legs of each leg's cost against the Riccati optimum from its start
-(:mod:`rrtq_bringup.leg_costs`), the largest commanded force per axis on ``/cmd_force``,
+(:mod:`rrtq_bringup.leg_table`), the largest commanded force per axis on ``/cmd_force``,
 and the guard's reverts and holds (``/controller/state.policy_event``). The rows are the
 markdown table of ``benchmarks/results/defaults_only_bench.md``.
 
@@ -20,28 +20,22 @@ import json
 import pathlib
 import sys
 
-from mcap_ros2.reader import read_ros2_messages
+import numpy as np
 
-from rrtq_bringup.leg_costs import evaluate
-from rrtq_bringup.leg_table import summary
+from rrtq_bringup.leg_table import leg_table, summary
+from rrtq_bringup.run_data import read_run, recorded_scenario
 
 
 def seed_row(seed_dir: pathlib.Path) -> dict:
-    """The row of one seed's run directory (run.mcap and summary.json)."""
+    """The row of one seed's run directory (run.mcap and summary.json), read once."""
     mcap = seed_dir / 'run.mcap'
     outcome = json.loads((seed_dir / 'summary.json').read_text())['outcome']
-    u_max, events = 0.0, {'reverted': 0, 'hold': 0}
-    for m in read_ros2_messages(str(mcap), topics=['/cmd_force', '/controller/state']):
-        msg = m.ros_msg
-        if m.channel.topic == '/cmd_force':
-            f = msg.wrench.force
-            u_max = max(u_max, abs(f.x), abs(f.y))
-        else:
-            for e in filter(None, msg.policy_event.split(';')):
-                if e in events:
-                    events[e] += 1
-    ratio = summary(evaluate(mcap))['median_ratio_last10']
-    return {'seed': seed_dir.name, 'outcome': outcome, 'ratio': ratio, 'u_max': u_max, **events}
+    data = read_run(mcap)
+    events = [e for _, joined, _ in data.policy_events for e in joined.split(';')]
+    ratio = summary(leg_table(data, recorded_scenario(mcap)))['median_ratio_last10']
+    u_max = float(np.abs(data.cmd_u).max(initial=0.0))
+    return {'seed': seed_dir.name, 'outcome': outcome, 'ratio': ratio, 'u_max': u_max,
+            'reverted': events.count('reverted'), 'hold': events.count('hold')}
 
 
 def main(argv: list[str] | None = None) -> int:
