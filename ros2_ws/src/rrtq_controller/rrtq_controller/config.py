@@ -225,6 +225,14 @@ class ControllerConfig:
                                       'the speed exceeds divergence_speed (L + |v0| T) / T '
                                       '+ divergence_floor (L the leg length, v0 its initial '
                                       'velocity)')
+    divergence_deviation: float = setting(0.25, unit='m', low=0.0, doc='guard: a leg also '
+                                          'diverges when the robot is farther from its line '
+                                          'than the widest distance of the legs before it '
+                                          '(the running-max margin) plus this; the controller '
+                                          'then brakes to rest (inf: off)')
+    """Beyond the margin the obstacles of the current plan were grown by, the plan no longer
+    keeps the robot clear (:class:`guard.DivergenceWatch`); stopping lets the safety node
+    grow them and the planner plan again from where the robot is."""
     safe_hold: SafeHold = setting(SafeHold.BRAKE, doc='guard: what a leg that diverged before '
                                   'any policy completed a leg holds: brake | initial')
     """The initial policy is the zero gain unless ``initial_gain`` is given, and a lightly

@@ -98,8 +98,19 @@ class DivergenceWatch:
     has a new target, though, and its x̄ says how far the robot is from that one: when the
     caller says how far the target moved, D is measured from the reference leg's own
     target (x̄ + ``offset``, ``offset`` the sum of the moves), so a plan that sends the
-    robot to a farther waypoint is not taken for a robot running away. It trips at most
-    once per leg.
+    robot to a farther waypoint is not taken for a robot running away.
+
+    A leg also diverges when the robot leaves its line: its distance from the straight
+    line through the leg's start and target, |x̄0 × x̄| / |x̄0| over the positions (D_rob,
+    RRT-QX eq. 6, as the safety node measures it), exceeds the largest such distance of
+    the legs before it (``widest`` at the leg's start: the paper's running-max margin,
+    eq. 7, that the obstacles of the current plan were grown by) plus ``deviation`` (m).
+    Beyond that margin the plan no longer keeps the robot off the obstacles, whatever the
+    policy; :attr:`off_line` says that this criterion tripped (the controller then brakes,
+    :class:`Brake`, until the margin and the plan have caught up with the robot). Every
+    leg is measured from its own start, restarted or not; a leg no longer than
+    ``deviation`` (holding station) has no line at that scale and is not watched for it.
+    It trips at most once per leg.
     """
 
     distance: float
@@ -111,6 +122,15 @@ class DivergenceWatch:
     tripped: bool = False
     offset: Array | None = None
     """The reference leg's target seen from the current one's (state units), or None."""
+    deviation: float = math.inf
+    """m beyond ``widest`` (at the leg's start) at which a robot off its line trips the watch."""
+    widest: float = 0.0
+    """m: the largest distance from its leg's line the robot has had so far (all legs)."""
+    off_line: bool = False
+    """Whether the last trip was the robot leaving its line (not D or the speed)."""
+    line: Array | None = None
+    """The current leg's start seen from its target, x̄0[:2] (None before the first leg)."""
+    line_limit: float = math.inf
 
     def start(self, x0: Array, renew: bool = True, moved: Array | None = None) -> None:
         """A new leg from x̄0; ``renew`` makes it the reference.
@@ -120,7 +140,10 @@ class DivergenceWatch:
         reference leg that started on its target (D0 = 0: the robot at rest before the
         first plan) is no reference; the next leg replaces it in any case.
         """
-        self.tripped = False
+        self.tripped = self.off_line = False
+        self.line = np.asarray(x0, dtype=float)[:2].copy()
+        short = float(np.linalg.norm(self.line)) <= self.deviation   # no line at that scale
+        self.line_limit = math.inf if short else self.widest + self.deviation
         if not renew and self.d0 > 1e-9:
             if moved is None or self.offset is None:
                 self.offset = None
@@ -135,6 +158,8 @@ class DivergenceWatch:
 
     def check(self, x: Array) -> str:
         """'' while the leg is fine; the criterion it broke, the first time it breaks one."""
+        off = self.distance_from_line(x)
+        self.widest = max(self.widest, off)
         if self.tripped:
             return ''
         d = float(np.linalg.norm(x if self.offset is None else x + self.offset))
@@ -146,7 +171,21 @@ class DivergenceWatch:
         if v > self.speed_bound:
             self.tripped = True
             return f'speed {v:.3g} > {self.speed_bound:.3g} (bound from the leg length and T)'
+        if off > self.line_limit:
+            self.tripped = self.off_line = True
+            return (f'{off:.3g} m off its line > {self.line_limit - self.deviation:.3g} m '
+                    f'(the widest before) + {self.deviation:g}')
         return ''
+
+    def distance_from_line(self, x: Array) -> float:
+        """m: |x̄0 × x̄| / |x̄0| over the positions; |x̄| for a leg of no length (D_rob)."""
+        if self.line is None:
+            return 0.0
+        p, s = np.asarray(x, dtype=float)[:2], self.line
+        length = float(np.linalg.norm(s))
+        if length < 1e-12:
+            return float(np.linalg.norm(p))
+        return abs(float(s[0] * p[1] - s[1] * p[0])) / length
 
 
 @dataclass
@@ -180,11 +219,14 @@ class Brake:
     rest_speed: float = 0.05
     force: float = 0.0
     prev: Array | None = None
+    at_rest: bool = False
+    """Whether the speed was at most ``rest_speed`` at the last step."""
 
     def start(self, force: float) -> None:
         """A new hold from ``force`` (N), no previous velocity."""
         self.force = min(force, self.limit)
         self.prev = None
+        self.at_rest = False
 
     def __call__(self, x: Array, m: int) -> Array:
         """The braking force (m,) for the state x̄; zero when x̄ has no velocity part."""
@@ -200,4 +242,5 @@ class Brake:
             elif speed > self.rest_speed and speed > before * (1.0 - self.dt / self.stop_time):
                 self.force = min(2.0 * self.force, self.limit)
         self.prev = v.copy()
+        self.at_rest = speed <= self.rest_speed
         return np.asarray(-self.force * v / max(speed, self.rest_speed), dtype=float)

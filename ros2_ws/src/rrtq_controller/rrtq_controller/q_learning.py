@@ -83,11 +83,16 @@ class QLearningController(WeightReadout):
         """Whether a target was adopted since a leg last completed."""
         """The actors' weights when a leg last entered its window (the revert point)."""
         self._watch = DivergenceWatch(c.divergence_distance, c.divergence_floor,
-                                      c.divergence_speed, c.horizon)
+                                      c.divergence_speed, c.horizon,
+                                      deviation=c.divergence_deviation)
         self._held = False
         self._brake = Brake(c.force_limit, c.hold_stop_time, c.dt)
         self._braking = False
-        """Whether this leg is in the safe hold's brake (a HOLD with ``safe_hold: brake``)."""
+        """Whether the robot is being braked (a HOLD with ``safe_hold: brake``, or a leg that
+        left its line): until the robot is at rest, at most T, and then only on a policy
+        that completed a leg or from a new leg on (the initial policy may be the zero gain,
+        under which a lightly damped robot drifts off again)."""
+        self._brake_started = self._brake_until = 0.0
         self._events: list[tuple[PolicyEvent, str]] = []
         self.event_counts = {e: 0 for e in PolicyEvent}
         """How often each :class:`guard.PolicyEvent` happened."""
@@ -139,7 +144,7 @@ class QLearningController(WeightReadout):
         self._prev = None
         self._watch.start(np.asarray(x0_bar, dtype=float), renew,
                           None if moved is None else np.asarray(moved, dtype=float))
-        self._held = self._braking = False
+        self._held = False   # a brake goes on (:meth:`step`)
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
 
     def renew_horizon(self, x0_bar: Array, t: float) -> None:
@@ -152,7 +157,7 @@ class QLearningController(WeightReadout):
         self._t0 = float(t)
         self._prev = None
         self._watch.start(np.asarray(x0_bar, dtype=float))
-        self._held = self._braking = False
+        self._held = False
 
     def completed_leg(self) -> None:
         """Mark the current leg as completed (it entered its window).
@@ -203,7 +208,7 @@ class QLearningController(WeightReadout):
             e_c1, e_c2 = self.critic_update(tau, x, d_prev)
         reason = self._watch.check(x)
         if reason:
-            self.revert(reason)
+            self.revert(reason, t, brake=self._watch.off_line)
         phi = self.time_basis(tau)  # after the update, which may widen the basis
         e_a = e_d = np.zeros(0)
         if self.leg_index >= self.config.actor_warmup_legs:
@@ -212,6 +217,9 @@ class QLearningController(WeightReadout):
                 e_d = self.disturbance_actor_update(phi, x, self._target[1])
         noise = self._probing_u.sample(self.probing_std)
         limit = self.config.force_limit
+        if self._braking and (t >= self._brake_until or self._brake.at_rest and (
+                self._completed is not None or self._t0 > self._brake_started)):
+            self._braking = False   # at rest: a policy that completed a leg, or a new leg
         if self._braking:
             noise = np.zeros(self.m)
             u = np.clip(self._brake(x, self.m), -limit, limit)
@@ -378,7 +386,7 @@ class QLearningController(WeightReadout):
         return all(np.linalg.eigvalsh(self.policy_value_kernel(t, theta, Wa, Wd)).min() > 0
                    for t in taus)
 
-    def revert(self, reason: str) -> None:
+    def revert(self, reason: str, t: float = 0.0, brake: bool = False) -> None:
         """A leg diverged: back to the last policy that completed a leg (or the initial one).
 
         When nothing was adopted since that policy completed its leg, it is the policy
@@ -388,17 +396,22 @@ class QLearningController(WeightReadout):
         window (they are valid rows for any policy). A hold to the initial policy brakes
         instead with ``safe_hold: brake`` (the default; :class:`guard.Brake`, starting
         from the probing scale or the RMS force of the stored data): the robot is stopped
-        where it is, and the initial policy takes over again at the next leg.
+        where it is, and the initial policy takes over again at the next leg. ``brake``
+        (a leg that left its line, :class:`guard.DivergenceWatch`) brakes in either case and
+        keeps the completed policy: a turn sharper than any before leaves the line under a
+        good policy too.
+        A brake lasts until the robot is at rest, at most a horizon from ``t`` (s).
         """
-        if self._completed is not None and not self._adopted_since:
-            self._completed = None
+        if self._completed is not None and not self._adopted_since and not brake:
+            self._completed = None   # off its line, the robot may have turned too fast
         event = PolicyEvent.REVERTED if self._completed is not None else PolicyEvent.HOLD
         Wa, Wd = self._completed if self._completed is not None else self._initial
         self._Wa, self._Wd = Wa.copy(), Wd.copy()
         self._target = (Wa.copy(), Wd.copy())
         self._held = True
-        if event is PolicyEvent.HOLD and self.config.safe_hold is SafeHold.BRAKE:
+        if brake or (event is PolicyEvent.HOLD and self.config.safe_hold is SafeHold.BRAKE):
             self._braking = True
+            self._brake_started, self._brake_until = t, t + self.config.horizon
             self._brake.start(max(self._force_scale(self.critic.window.samples()[4]), 1.0))
             reason += ', braking'
         self._note(event, 'leg diverged: ' + reason)
