@@ -271,3 +271,52 @@ def test_brake_force_halves_when_the_velocity_reverses_and_doubles_when_it_does_
     for _ in range(10):
         b(np.array([0, 0, 3.0, 0]), 2)
     assert b.force == 100.0                    # never beyond the limit
+
+
+def test_the_watch_trips_when_the_robot_leaves_its_line_beyond_the_widest_before():
+    """D_rob (the distance from the leg's line) past the running max of the legs before
+    plus ``deviation``: the margin the plan's obstacles were grown by no longer holds."""
+    watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0, deviation=0.25)
+    watch.start(np.array([-4.0, 0.0, 0.0, 0.0]))         # along x; the line is y = 0
+    assert watch.check(np.array([-3.0, 0.2, 0.3, 0.1])) == ''   # 0.2 m off: within 0 + 0.25
+    assert watch.widest == pytest.approx(0.2)
+    reason = watch.check(np.array([-2.5, 0.3, 0.3, 0.1]))
+    assert watch.off_line and 'off its line' in reason
+    assert watch.widest == pytest.approx(0.3)
+    # the next leg may go as far as the widest so far plus the allowance, not further
+    watch.start(np.array([0.0, -4.0, 0.0, 0.0]))         # along y; the line is x = 0
+    assert watch.check(np.array([0.5, -2.0, 0.0, 0.3])) == '' and not watch.off_line
+    assert watch.check(np.array([0.56, -1.0, 0.0, 0.3])) != '' and watch.off_line
+    # a leg no longer than the allowance (holding station) has no line to leave
+    watch.start(np.array([0.1, 0.0, 0.0, 0.0]))
+    assert watch.check(np.array([0.0, 0.9, 0.0, 0.0])) == ''
+
+
+def test_a_leg_that_leaves_its_line_brakes_to_rest_and_keeps_the_policy_that_completed_a_leg():
+    """Off its line under a policy that has completed a leg (a turn sharper than any
+    before): the robot is stopped within the limit, the completed policy is kept (not
+    discarded as the diverging one), and it takes over again once the robot is at rest."""
+    A, B = ref.rover(mass=110.0, stiffness=0.0, damping=15.0)
+    plant = ref.Plant(A, B, DT)
+    cfg = ControllerConfig(force_limit=200.0, probing_std=0.0)
+    ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(0))
+    good = np.array([[20.0, 0.0, 60.0, 0.0], [0.0, 20.0, 0.0, 60.0]])
+    ctrl.start_leg(np.array([-4.0, 0.0, 0.0, 0.0]), 0.0)
+    ctrl.set_weights(actor=np.vstack([-good.T, np.zeros(((ctrl.time_basis.size - 1) * 4, 2))]))
+    ctrl.completed_leg()
+    x = np.array([-4.0, 0.0, 0.0, 2.0])                  # crossing the line at 2 m/s
+    ctrl.start_leg(x, 10.0, completed=True)
+    events, speeds, umax = [], [], 0.0
+    for k in range(int(8.0 / DT)):
+        u = ctrl.step(10.0 + k * DT, x)
+        umax = max(umax, float(np.abs(u).max()))
+        events.append((ctrl.info.policy_event, ctrl.info.policy_reason))
+        x = plant.step(x, u)
+        speeds.append(float(np.linalg.norm(x[2:])))
+    tripped = [(e, r) for e, r in events if e]
+    assert tripped[0][0] == 'reverted' and 'off its line' in tripped[0][1]
+    assert tripped[0][1].endswith('braking')
+    assert umax <= 200.0
+    assert np.allclose(ctrl.gain(T), good, rtol=1e-6, atol=1e-6)   # the policy is kept
+    assert max(speeds[1:]) <= 2.0 + 1e-9                            # the brake only slows
+    assert np.linalg.norm(x[:2]) < 0.5                              # the policy took over again
