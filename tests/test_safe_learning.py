@@ -87,9 +87,12 @@ def test_a_defaults_only_scenario_learns_safely_and_reaches_its_goal(tmp_path):
     assert data.force_limit == 1000.0
     assert np.abs(data.cmd_u).max() <= data.force_limit
     # it learned through the guard: adoptions recorded, and no leg ran away from its target
+    # (D or the speed); a leg may have braked where it left its line past the margin
     events = [e for _, e, _ in data.policy_events]
     assert events.count('adopted') >= 3
-    assert 'reverted' not in events and 'hold' not in events
+    stops = [(e, reason) for _, e, reason in data.policy_events
+             if {'reverted', 'hold'} & set(e.split(';'))]
+    assert all('off its line' in reason and 'braking' in reason for _, reason in stops), stops
     assert judged['max_d_rob_m'] < 5.0
     # each leg's cost against the Riccati optimum from its start, the last ten legs
     table = summary(evaluate(out / 'run.mcap'))
