@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from rrtq_planner.margins.coverage import binomial_interval
-from rrtq_planner.safety import kinodynamic_distance
+from rrtq_common.geometry import kinodynamic_distance
 
 __all__ = ['LegCoverage', 'Coverage', 'leg_coverage', 'coverage', 'main']
 

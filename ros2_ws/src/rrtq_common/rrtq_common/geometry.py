@@ -20,6 +20,7 @@ __all__ = [
     'point_in_polygon',
     'point_polygon_distance',
     'disc_intersects_polygon',
+    'kinodynamic_distance',
 ]
 
 
@@ -153,3 +154,22 @@ def point_polygon_distance(points: npt.ArrayLike, polygon: npt.ArrayLike) -> np.
 def disc_intersects_polygon(center: npt.ArrayLike, radius: float, polygon: npt.ArrayLike) -> bool:
     """True when the closed disc touches or overlaps the polygon (or contains it)."""
     return bool(point_polygon_distance(center, polygon) <= radius)
+
+
+def kinodynamic_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
+                         position: npt.ArrayLike) -> float:
+    """D_rob = |x̄₀ × x̄| / D₀ (RRT-QX eq. 6) in the plane.
+
+    The robot's distance (m) from the straight line through the leg's start and target.
+
+    The cross product and D₀ are taken over the position components, which makes D_rob
+    the perpendicular distance to the leg's line (the paper's x̄ carries velocities too,
+    whose cross product has no geometric meaning). A leg of zero length has no line:
+    D_rob is then the distance from the target.
+    """
+    x0bar = np.asarray(leg_start, dtype=float)[:2] - np.asarray(leg_target, dtype=float)[:2]
+    xbar = np.asarray(position, dtype=float)[:2] - np.asarray(leg_target, dtype=float)[:2]
+    d0 = math.hypot(*x0bar)
+    if d0 < 1e-12:
+        return math.hypot(*xbar)
+    return abs(x0bar[0] * xbar[1] - x0bar[1] * xbar[0]) / d0

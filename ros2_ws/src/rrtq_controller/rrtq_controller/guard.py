@@ -22,6 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from rrtq_common.geometry import kinodynamic_distance
+
 Array = NDArray[np.float64]
 
 
@@ -178,14 +180,8 @@ class DivergenceWatch:
         return ''
 
     def distance_from_line(self, x: Array) -> float:
-        """m: |x̄0 × x̄| / |x̄0| over the positions; |x̄| for a leg of no length (D_rob)."""
-        if self.line is None:
-            return 0.0
-        p, s = np.asarray(x, dtype=float)[:2], self.line
-        length = float(np.linalg.norm(s))
-        if length < 1e-12:
-            return float(np.linalg.norm(p))
-        return abs(float(s[0] * p[1] - s[1] * p[0])) / length
+        """m: D_rob of x̄ on the current leg (its start x̄0, its target the origin of x̄)."""
+        return 0.0 if self.line is None else kinodynamic_distance(self.line, (0.0, 0.0), x)
 
 
 @dataclass

@@ -19,6 +19,7 @@ import numpy.typing as npt
 import shapely
 from shapely.geometry import Polygon
 
+from rrtq_common.geometry import kinodynamic_distance
 from rrtq_common.lockstep import OnChange
 from rrtq_common.polygon_set import LivePolygons, PolygonSet
 from rrtq_common.settings import check, setting
@@ -28,25 +29,6 @@ Obstacles = list[tuple[str, np.ndarray]]
 
 # m: how far outside a grown obstacle the robot is kept when the margin is capped.
 KEEP_OUT = 0.05
-
-
-def kinodynamic_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
-                         position: npt.ArrayLike) -> float:
-    """D_rob = |x̄₀ × x̄| / D₀ (RRT-QX eq. 6) in the plane.
-
-    The robot's distance (m) from the straight line through the leg's start and target.
-
-    The cross product and D₀ are taken over the position components, which makes D_rob
-    the perpendicular distance to the leg's line (the paper's x̄ carries velocities too,
-    whose cross product has no geometric meaning). A leg of zero length has no line:
-    D_rob is then the distance from the target.
-    """
-    x0bar = np.asarray(leg_start, dtype=float)[:2] - np.asarray(leg_target, dtype=float)[:2]
-    xbar = np.asarray(position, dtype=float)[:2] - np.asarray(leg_target, dtype=float)[:2]
-    d0 = math.hypot(*x0bar)
-    if d0 < 1e-12:
-        return math.hypot(*xbar)
-    return abs(x0bar[0] * xbar[1] - x0bar[1] * xbar[0]) / d0
 
 
 def grow_polygon(polygon: np.ndarray, radius: float, sides: int = 32) -> np.ndarray:

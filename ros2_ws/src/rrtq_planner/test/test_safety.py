@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import shapely
 
-from rrtq_planner.safety import (SafetyConfig, SafetyMonitor, augment, clearance,
-                                 kinodynamic_distance)
+from rrtq_common.geometry import kinodynamic_distance
+from rrtq_planner.safety import SafetyConfig, SafetyMonitor, augment, clearance
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]])
 

@@ -25,7 +25,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from rrtq_planner.safety import kinodynamic_distance
+from rrtq_common.geometry import kinodynamic_distance
 
 from .conformal import ConformalConfig, ConformalQuantile
 
