@@ -21,6 +21,7 @@ __all__ = [
     'point_polygon_distance',
     'disc_intersects_polygon',
     'kinodynamic_distance',
+    'ray_distance',
 ]
 
 
@@ -173,3 +174,23 @@ def kinodynamic_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
     if d0 < 1e-12:
         return math.hypot(*xbar)
     return abs(x0bar[0] * xbar[1] - x0bar[1] * xbar[0]) / d0
+
+
+
+def ray_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
+                 position: npt.ArrayLike) -> float:
+    """The robot's distance (m) from the ray from the leg's start through its target.
+
+    At least D_rob (:func:`kinodynamic_distance`, the distance from the leg's *line*), and
+    larger where the robot is behind the start: a robot drifting backwards along its line,
+    away from its target, leaves the region a plan keeps clear around its edges (the
+    segment grown by the margin) with D_rob unchanged. Past the target it is D_rob: a
+    learning policy's overshoot there is measured as the paper measures it. A leg of zero
+    length is its start: the distance from it.
+    """
+    a = np.asarray(leg_start, dtype=float)[:2]
+    ab = np.asarray(leg_target, dtype=float)[:2] - a
+    ap = np.asarray(position, dtype=float)[:2] - a
+    len2 = float(ab @ ab)
+    s = 0.0 if len2 < 1e-24 else max(float(ap @ ab) / len2, 0.0)
+    return math.hypot(*(ap - s * ab))

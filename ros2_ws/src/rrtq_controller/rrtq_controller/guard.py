@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from rrtq_common.geometry import kinodynamic_distance
+from rrtq_common.geometry import kinodynamic_distance, ray_distance
 
 Array = NDArray[np.float64]
 
@@ -102,16 +102,23 @@ class DivergenceWatch:
     target (x̄ + ``offset``, ``offset`` the sum of the moves), so a plan that sends the
     robot to a farther waypoint is not taken for a robot running away.
 
-    A leg also diverges when the robot leaves its line: its distance from the straight
-    line through the leg's start and target, |x̄0 × x̄| / |x̄0| over the positions (D_rob,
-    RRT-QX eq. 6, as the safety node measures it), exceeds the largest such distance of
-    the legs before it (``widest`` at the leg's start: the paper's running-max margin,
-    eq. 7, that the obstacles of the current plan were grown by) plus ``deviation`` (m).
-    Beyond that margin the plan no longer keeps the robot off the obstacles, whatever the
-    policy; :attr:`off_line` says that this criterion tripped (the controller then brakes,
-    :class:`Brake`, until the margin and the plan have caught up with the robot). Every
+    A leg also diverges when the robot leaves its line: its distance from the ray from the
+    leg's start through its target (:func:`rrtq_common.geometry.ray_distance`) exceeds
+    the largest distance from its line of the legs before it (``widest`` at the leg's
+    start: D_rob, RRT-QX eq. 6, as the safety node measures it, |x̄0 × x̄| / |x̄0|; its
+    running maximum is the paper's margin, eq. 7, that the obstacles of the current plan
+    were grown by) plus ``deviation`` (m). The plan keeps the segment grown by that margin
+    clear; beyond it the plan no longer keeps the robot off the obstacles, whatever the
+    policy. The ray, not the line: a robot drifting backwards past its start, away from
+    its target, leaves that region with D_rob unchanged (seen on the rover without a
+    spring: 1.1 m behind the start of a 0.59 m leg, into an obstacle). Past the target it
+    is D_rob: an overshoot there is a learning policy's transient (1 m on the third leg of
+    the robust learning test, which braking there made learn worse), and the leg is then
+    near its end. :attr:`off_line` says that this criterion tripped (the controller then
+    brakes, :class:`Brake`, until the margin and the plan have caught up with the robot). Every
     leg is measured from its own start, restarted or not; a leg no longer than
-    ``deviation`` (holding station) has no line at that scale and is not watched for it.
+    ``deviation`` (holding station, or a robot told to stop where it is while moving) has
+    no line at that scale and is not watched for it.
     It trips at most once per leg.
     """
 
@@ -125,7 +132,7 @@ class DivergenceWatch:
     offset: Array | None = None
     """The reference leg's target seen from the current one's (state units), or None."""
     deviation: float = math.inf
-    """m beyond ``widest`` (at the leg's start) at which a robot off its line trips the watch."""
+    """m beyond ``widest`` (at the leg's start) at which a robot off its ray trips the watch."""
     widest: float = 0.0
     """m: the largest distance from its leg's line the robot has had so far (all legs)."""
     off_line: bool = False
@@ -173,15 +180,20 @@ class DivergenceWatch:
         if v > self.speed_bound:
             self.tripped = True
             return f'speed {v:.3g} > {self.speed_bound:.3g} (bound from the leg length and T)'
+        off = self.distance_from_ray(x)
         if off > self.line_limit:
             self.tripped = self.off_line = True
-            return (f'{off:.3g} m off its line > {self.line_limit - self.deviation:.3g} m '
+            return (f'{off:.3g} m off its line (ray) > {self.line_limit - self.deviation:.3g} m '
                     f'(the widest before) + {self.deviation:g}')
         return ''
 
     def distance_from_line(self, x: Array) -> float:
         """m: D_rob of x̄ on the current leg (its start x̄0, its target the origin of x̄)."""
         return 0.0 if self.line is None else kinodynamic_distance(self.line, (0.0, 0.0), x)
+
+    def distance_from_ray(self, x: Array) -> float:
+        """m: x̄'s distance from the current leg's ray (from x̄0 through the origin of x̄)."""
+        return 0.0 if self.line is None else ray_distance(self.line, (0.0, 0.0), x)
 
 
 @dataclass

@@ -4,6 +4,8 @@ Ground truth from the true plants (rrtq_testing.controller_reference), which the
 controller never sees.
 """
 
+import math
+
 import numpy as np
 
 import pytest
@@ -215,10 +217,13 @@ def test_a_new_plan_to_a_farther_waypoint_is_not_a_robot_running_away():
 
 def _coast_after_hold(safe_hold, mass, damping, limit, v0=2.5, seconds=8.0):
     """A leg whose first policy runs away before any policy completed a leg: the watch
-    trips and holds. Returns (distance travelled after the hold, largest |u|, speeds)."""
+    trips and holds. Returns (distance travelled after the hold, largest |u|, speeds).
+    The line watch is off: the robot runs backwards along its line, past its start, and
+    the watch would brake it whatever the hold; this is about the hold alone."""
     A, B = ref.rover(mass=mass, stiffness=0.0, damping=damping)
     plant = ref.Plant(A, B, DT)
-    cfg = ControllerConfig(force_limit=limit, safe_hold=safe_hold, probing_std=20.0)
+    cfg = ControllerConfig(force_limit=limit, safe_hold=safe_hold, probing_std=20.0,
+                           divergence_deviation=math.inf)
     ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(3))
     x = np.array([-2.0, 0.0, -v0, 0.0])      # already moving away from its target
     ctrl.start_leg(x, 0.0)
@@ -274,8 +279,9 @@ def test_brake_force_halves_when_the_velocity_reverses_and_doubles_when_it_does_
 
 
 def test_the_watch_trips_when_the_robot_leaves_its_line_beyond_the_widest_before():
-    """D_rob (the distance from the leg's line) past the running max of the legs before
-    plus ``deviation``: the margin the plan's obstacles were grown by no longer holds."""
+    """The distance from the leg's segment past the running max of D_rob (the distance
+    from the line) of the legs before plus ``deviation``: the margin the plan's obstacles
+    were grown by no longer holds."""
     watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0, deviation=0.25)
     watch.start(np.array([-4.0, 0.0, 0.0, 0.0]))         # along x; the line is y = 0
     assert watch.check(np.array([-3.0, 0.2, 0.3, 0.1])) == ''   # 0.2 m off: within 0 + 0.25
@@ -290,6 +296,20 @@ def test_the_watch_trips_when_the_robot_leaves_its_line_beyond_the_widest_before
     # a leg no longer than the allowance (holding station) has no line to leave
     watch.start(np.array([0.1, 0.0, 0.0, 0.0]))
     assert watch.check(np.array([0.0, 0.9, 0.0, 0.0])) == ''
+
+
+def test_the_watch_sees_a_robot_drifting_backwards_along_its_line_past_the_start():
+    """D_rob is blind along the line; the ray is not. A robot 0.6 m behind its start, on
+    the line, has D_rob = 0 but is 0.6 m outside the region the plan kept clear. Past the
+    target the ray is the line: an overshoot is measured as D_rob."""
+    watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0, deviation=0.25)
+    watch.start(np.array([-1.0, 0.0, 0.0, 0.0]))         # from (-1, 0) to the origin
+    assert watch.check(np.array([-1.2, 0.0, -0.1, 0.0])) == ''  # 0.2 m behind the start
+    reason = watch.check(np.array([-1.6, 0.0, -0.1, 0.0]))       # 0.6 m behind: D_rob = 0
+    assert watch.off_line and 'off its line (ray)' in reason and watch.widest == 0.0
+    watch.start(np.array([-1.0, 0.0, 0.0, 0.0]))
+    assert watch.check(np.array([0.9, 0.2, 0.1, 0.0])) == ''    # 0.9 m past the target
+    assert watch.check(np.array([0.9, 0.3, 0.1, 0.0])) != '' and watch.off_line
 
 
 def test_a_leg_that_leaves_its_line_brakes_to_rest_and_keeps_the_policy_that_completed_a_leg():

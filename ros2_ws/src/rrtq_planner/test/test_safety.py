@@ -6,10 +6,27 @@ import numpy as np
 import pytest
 import shapely
 
-from rrtq_common.geometry import kinodynamic_distance
+from rrtq_common.geometry import kinodynamic_distance, ray_distance
 from rrtq_planner.safety import SafetyConfig, SafetyMonitor, augment, clearance
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]])
+
+
+def test_ray_distance_matches_shapely_and_bounds_d_rob():
+    """The distance from the ray from a leg's start through its target, against shapely's
+    distance to that ray cut 1e4 m out: never below D_rob, equal to it abreast of the
+    segment or past the target, the distance from the start behind it."""
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        a, b, p = rng.uniform(-5, 5, (3, 2))
+        far = a + 1e4 * (b - a) / np.linalg.norm(b - a)
+        exact = shapely.LineString([a, far]).distance(shapely.Point(p))
+        assert ray_distance(a, b, p) == pytest.approx(exact, abs=1e-9)
+        assert ray_distance(a, b, p) >= kinodynamic_distance(a, b, p) - 1e-12
+    assert ray_distance([0, 0], [10, 0], [3, 0.7]) == pytest.approx(0.7)      # abreast
+    assert ray_distance([0, 0], [10, 0], [14, -0.5]) == pytest.approx(0.5)    # past the target
+    assert ray_distance([0, 0], [10, 0], [-1.5, 0.0]) == pytest.approx(1.5)   # behind
+    assert ray_distance([2, 2], [2, 2], [5, 6]) == pytest.approx(5.0)         # a point
 
 
 def test_kinodynamic_distance_is_the_distance_to_the_leg_line():
