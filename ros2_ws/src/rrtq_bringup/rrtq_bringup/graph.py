@@ -8,7 +8,8 @@ node declares its parameters from the same dataclasses.
 
 Lock-step chain of one step k (each arrow: "waits for, stamped t_k"):
 spawner (odom) -> safety (perception status, controller state of k-1) -> planner
-(safety status) -> controller (planner stats; disturbance of k-1 when robust) ->
+(safety status) -> controller (planner stats; the safety status, for the keep-off;
+disturbance of k-1 when robust) ->
 disturbance injector (controller state, worst case only) -> simulator (command,
 controller state, disturbance) -> step k+1. Outputs published only on change
 (detected map, augmented set, plan) are named by the stamp in the status that

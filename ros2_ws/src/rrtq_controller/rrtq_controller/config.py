@@ -240,6 +240,11 @@ class ControllerConfig:
     hold_stop_time: float = setting(1.0, unit='s', **_POSITIVE, doc='guard: the brake doubles '
                                     'its force while the speed falls slower than to stop '
                                     'within this time')
+    keep_off: float = setting(0.3, unit='m', low=0.0, doc='guard: within this distance of '
+                              'the nearest detected obstacle (/safety/status), an approach '
+                              'to it is pushed back (learning variants; 0: off)')
+    """:class:`guard.KeepOff`; needs the safety node's /safety/status (lock-step: of the same
+    step), which the learning controller then waits for."""
     forces: tuple[tuple[float, float, float], ...] = setting(
         (), columns=3, doc='open_loop: the force profile, rows [t (s), f_x (N), f_y (N)], '
         'piecewise constant from each t')
@@ -296,6 +301,8 @@ class StepInfo:
     """Disturbance-actor error e_d before the update (robust)."""
     probing: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     """Probing noise added to the control output, N."""
+    keep_off: float = 0.0
+    """N: the push away from the nearest detected obstacle added this step (guard.KeepOff)."""
     policy_event: str = ''
     """What the guard did this step: '' (nothing), or :class:`guard.PolicyEvent` values
     joined by ';' (an evaluation at a leg start can both reject and revert)."""

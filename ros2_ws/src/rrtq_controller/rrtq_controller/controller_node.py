@@ -1,16 +1,19 @@
 """Controller node: /odom and /plan in, /cmd_force and /controller/state out.
 
+The learning variants also read /safety/status: the nearest detected obstacle, for the
+keep-off (:class:`rrtq_controller.guard.KeepOff`).
+
 Variants: ``nominal`` and ``robust`` (model-free finite-horizon Q-learning, leg by leg
 along the plan) and ``open_loop`` (a scripted force profile): a
 :class:`rrtq_controller.driver.Driver` each. Every /odom step is answered with a
 /controller/state and a /cmd_force stamped with the odometry's time.
 
 In lock-step mode a step is processed only when its inputs are complete: the planner's
-statistics of the same step, and the plan they name when it changed (learning
-variants); the disturbance that acted over the previous step (robust variant, which
-learns the game from the measured disturbance); the guidance reference of the same step
-and the augmented obstacle set it names (vf_lpc, which tracks the reference and puts its
-barrier on those obstacles). Paced mode uses whatever arrived last.
+statistics of the same step, and the plan they name when it changed, and the safety
+status of the same step (learning variants; the keep-off); the disturbance that acted
+over the previous step (robust variant, which learns the game from the measured
+disturbance); the guidance reference of the same step and the augmented obstacle set it
+names (vf_lpc, which tracks the reference and puts its barrier on those obstacles). Paced mode uses whatever arrived last.
 """
 
 from __future__ import annotations
@@ -23,7 +26,7 @@ from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry, Path
 from rclpy.node import Node
 from rrtq_msgs.msg import (ControllerState, Disturbance, GuidanceReference, ObstacleArray,
-                           PlannerStats)
+                           PlannerStats, SafetyStatus)
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
@@ -38,6 +41,19 @@ from rrtq_controller.driver import Watch, make_driver
 from rrtq_controller.vf_lpc import LPCConfig
 
 
+def _keeps_off(config: ControllerConfig) -> bool:
+    """Whether the controller reads /safety/status for the keep-off (guard.KeepOff)."""
+    return config.variant in (Variant.NOMINAL, Variant.ROBUST) and config.keep_off > 0.0
+
+
+def _nearest(status: SafetyStatus | None) -> tuple[float, np.ndarray] | None:
+    """The nearest detected obstacle of a /safety/status (None: none received)."""
+    if status is None:
+        return None
+    d = status.obstacle_direction
+    return float(status.obstacle_distance), np.array([d.x, d.y])
+
+
 def _requirements(config: ControllerConfig) -> list[Requirement]:
     """What a lock-step step waits for: the planner's word on it, the last disturbance."""
     needs = []
@@ -46,6 +62,8 @@ def _requirements(config: ControllerConfig) -> list[Requirement]:
                                  names=lambda m: conv.stamp_ns(m.plan_stamp)))
     if config.variant is Variant.ROBUST:
         needs.append(Requirement('disturbance', lag=1))
+    if _keeps_off(config):
+        needs.append(Requirement('safety'))
     if config.variant is Variant.VF_LPC:
         needs.append(Requirement('reference', followup='augmented',
                                  names=lambda m: conv.stamp_ns(m.obstacles_stamp)))
@@ -79,6 +97,8 @@ class ControllerNode(Node):
             Input('plan', Path, topics.PLAN, qos.LATCHED),
             Input('stats', PlannerStats, topics.PLANNER_STATS, qos.STREAM),
             Input('disturbance', Disturbance, topics.DISTURBANCE, qos.STREAM))
+            + ((Input('safety', SafetyStatus, topics.SAFETY_STATUS, qos.STREAM),)
+               if _keeps_off(self.config) else ())
             + ((Input('reference', GuidanceReference, topics.GUIDANCE_REFERENCE, qos.STREAM),
                 Input('augmented', ObstacleArray, topics.OBSTACLES_AUGMENTED, qos.LATCHED))
                if vf_lpc else ()))
@@ -104,7 +124,8 @@ class ControllerNode(Node):
             t, conv.odometry_state(odom), conv.changed_path(plan),
             None if dist is None else dist.value, changed_reference(step.get('reference')),
             None if augmented is None else OnChange(
-                augmented.stamp_ns, lambda: [poly for _, poly in augmented.read()]))
+                augmented.stamp_ns, lambda: [poly for _, poly in augmented.read()]),
+            _nearest(step.get('safety')))
         if out is None:
             self.get_logger().error(f'non-finite odometry at t={t:.2f} s: commanding zero',
                                     throttle_duration_sec=1.0)

@@ -46,6 +46,7 @@ def controller_state_msg(stamp: Time, config: ControllerConfig,
         state.nominal_error = _floats(out.nominal_error)
         state.prediction_std = _floats(out.prediction_std)
         state.gp_dictionary = out.gp_dictionary
+        state.keep_off = float(out.keep_off)
     state.header.stamp = stamp
     state.header.frame_id = MAP_FRAME
     return state

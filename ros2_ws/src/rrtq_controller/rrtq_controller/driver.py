@@ -58,6 +58,7 @@ class ControlOutput:
     prediction_std: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
     gp_dictionary: int = 0
     horizon_cost: float = 0.0
+    keep_off: float = 0.0                # N: the push away from the nearest detected obstacle
 
 
 class Watch(enum.Enum):
@@ -91,6 +92,8 @@ class Driver(abc.ABC):
         self._last_odometry: float | None = None
         self._answered = False
         self.stale = False
+        self.nearest: tuple[float, Array] | None = None
+        """The nearest detected obstacle at this step (see :meth:`control`)."""
 
     @property
     def warnings(self) -> list[str]:
@@ -115,9 +118,12 @@ class Driver(abc.ABC):
     def control(self, t: float, x: ArrayLike, plan: OnChange[Array] | None,
                 disturbance: ArrayLike | None,
                 reference: OnChange[tuple[Array, int]] | None = None,
-                obstacles: OnChange[list[Array]] | None = None) -> ControlOutput | None:
+                obstacles: OnChange[list[Array]] | None = None,
+                nearest: tuple[float, Array] | None = None) -> ControlOutput | None:
         """One step: adopt a plan that changed (and the guidance), then :meth:`step`.
 
+        ``nearest``: the nearest detected obstacle (distance m, unit vector from it to the
+        robot) as the safety node reports it, for the learning variants' keep-off.
         None for non-finite odometry: the node commands zero, and nothing is learned.
         A non-finite disturbance measurement is not used.
         """
@@ -129,6 +135,7 @@ class Driver(abc.ABC):
             self._plan_stamp = plan.stamp_ns
             self.set_plan(plan.read(), state, t)
         self.set_guidance(reference, obstacles)
+        self.nearest = nearest
         d = None
         if disturbance is not None and np.all(np.isfinite(disturbance)):
             d = np.asarray(disturbance, dtype=float)
@@ -206,7 +213,8 @@ class LearningDriver(Driver):
         elif event is LegEvent.GOAL_REACHED and self.legs.completed:
             c.completed_leg()
         u = c.step(t, self.legs.x_bar(x),
-                   None if d_applied is None else np.asarray(d_applied, dtype=float))
+                   None if d_applied is None else np.asarray(d_applied, dtype=float),
+                   self.nearest)
         return self._output(u, x, event.value, t)
 
     def _moved(self, before: Array | None) -> Array | None:
@@ -229,7 +237,8 @@ class LearningDriver(Driver):
             disturbance_weights=c.disturbance_weights if c.robust else empty,
             critic_error=float(c.info.e_c1), terminal_error=float(c.info.e_c2), event=event,
             time_rates=tuple(c.time_basis.rates), time_powers=tuple(c.time_basis.powers),
-            policy_event=c.info.policy_event, policy_reason=c.info.policy_reason)
+            policy_event=c.info.policy_event, policy_reason=c.info.policy_reason,
+            keep_off=c.info.keep_off)
 
 
 class OpenLoopDriver(Driver):

@@ -252,3 +252,80 @@ class Brake:
         self.prev = v.copy()
         self.at_rest = speed <= self.rest_speed
         return np.asarray(-self.force * v / max(speed, self.rest_speed), dtype=float)
+
+
+@dataclass
+class KeepOff:
+    """Stops an approach to a detected obstacle: a push away from it, adapted on line.
+
+    The plan keeps the robot's *line* clear by the margin; the robot itself may still come
+    near an obstacle: after a brake that stopped it a few cm away (the margin grew past
+    where it stood, and the next plan from there skirts the obstacle), or when a learning
+    policy drifts. Like Nav2's collision monitor, which slows or stops a robot whose
+    footprint nears an obstacle, this acts on the robot's map (the safety node's nearest
+    *detected* obstacle: its distance c from the robot's disc and the unit vector n from
+    it to the robot), never on the truth, and with no model of the plant:
+
+    * within ``zone`` of the obstacle the command has no component toward it (its part
+      along n is raised to at least 0), and while the robot approaches it (a = -v · n > 0)
+      to at least +F, a push away; the tangential part of the command, and any stronger
+      push away, are left alone;
+    * F starts at the force :meth:`engage` is given (the probing scale, or the forces the
+      robot has been pushed with) and doubles, up to ``limit``, while the approach speed
+      does not fall fast enough to stop within the time to contact c / a; it halves when
+      the approach has reversed (the robot moves away: no push then), and the push is
+      proportional to a below ``rest_speed`` (no full push at sensor noise);
+    * outside the zone nothing is changed.
+
+    The push removes approach speed wherever a force along n accelerates the robot along
+    n (nᵀ B_v n > 0, as on the rover family). Beyond the papers, like the rest of this
+    module. The Bellman rows use the force applied, so learning stays consistent.
+    """
+
+    zone: float
+    limit: float
+    dt: float
+    rest_speed: float = 0.05
+    force: float = 0.0
+    prev: float | None = None
+    """The approach speed a at the last pushing step (None: not pushing)."""
+    push: float = 0.0
+    """N: how much the last step raised the command along n (0: not acting)."""
+
+    def __call__(self, u: Array, velocity: Array, distance: float, direction: Array,
+                 scale: float) -> Array:
+        """The command u (m,) with its approach component replaced by a push, if needed.
+
+        ``velocity`` (m,) the robot's, ``distance`` (m) and ``direction`` (unit, m) of the
+        nearest detected obstacle, ``scale`` (N) the force a new engagement starts from.
+        """
+        u = np.asarray(u, dtype=float)
+        n = np.asarray(direction, dtype=float)[:u.size]
+        if not (distance < self.zone) or float(n @ n) < 0.5:
+            self.release()                         # out of the zone (or no direction)
+            return u
+        self.push = 0.0
+        a = -float(np.asarray(velocity, dtype=float)[:u.size] @ n)
+        want = 0.0                                 # in the zone: no force toward it
+        if a <= 0.0:
+            if self.prev is not None:
+                self.force *= 0.5                  # the approach reversed: it overshot
+            self.prev = None
+        else:
+            if self.force <= 0.0:
+                self.force = min(max(scale, 1.0), self.limit)
+            elif self.prev is not None:
+                contact = max(distance, 0.0) / a   # s to contact at the current speed
+                if a > self.rest_speed and a > self.prev * (1.0 - self.dt / max(contact, self.dt)):
+                    self.force = min(2.0 * self.force, self.limit)
+            self.prev = a
+            want = self.force * min(1.0, a / self.rest_speed)
+        along = float(u @ n)
+        if along >= want:
+            return u
+        self.push = want - along
+        return np.asarray(u + self.push * n, dtype=float)
+
+    def release(self) -> None:
+        """Out of the zone: no push, and the next engagement starts afresh."""
+        self.force, self.prev, self.push = 0.0, None, 0.0

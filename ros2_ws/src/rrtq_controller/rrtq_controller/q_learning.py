@@ -29,7 +29,7 @@ from .basis import QuadraticBasis, TimeBasis
 from .bellman import Policy, bellman_rows
 from .config import ActorLaw, ControllerConfig, SafeHold, StepInfo, Variant
 from .critic import LeastSquaresCritic, fit, make_critic, residual
-from .guard import Brake, DivergenceWatch, PolicyEvent, held_below, trust_step
+from .guard import Brake, DivergenceWatch, KeepOff, PolicyEvent, held_below, trust_step
 from .probing import Probing
 from .readout import WeightReadout, _features
 from .stability import gain_warnings
@@ -87,6 +87,7 @@ class QLearningController(WeightReadout):
                                       deviation=c.divergence_deviation)
         self._held = False
         self._brake = Brake(c.force_limit, c.hold_stop_time, c.dt)
+        self._keep_off = KeepOff(c.keep_off, c.force_limit, c.dt)
         self._braking = False
         """Whether the robot is being braked (a HOLD with ``safe_hold: brake``, or a leg that
         left its line): until the robot is at rest, at most T, and then only on a policy
@@ -178,7 +179,8 @@ class QLearningController(WeightReadout):
         return max(c.probing_std * c.probing_decay ** max(self.leg_index, 0), c.probing_floor)
 
     # ---------------------------------------------------------------- step
-    def step(self, t: float, x_bar: Array, d_applied: Array | None = None) -> Array:
+    def step(self, t: float, x_bar: Array, d_applied: Array | None = None,
+             nearest: tuple[float, Array] | None = None) -> Array:
         """One control period (RRT-QX Alg. 1, lines 12-16; ACC Alg. 1, lines 8-14).
 
         Parameters
@@ -190,6 +192,10 @@ class QLearningController(WeightReadout):
         d_applied
             Robust variant: the disturbance that acted over [t - Δt, t], if measured;
             by default the controller's own :attr:`d_hat` output is assumed applied.
+        nearest
+            The nearest detected obstacle: its distance from the robot (m) and the unit
+            vector from it to the robot, for the keep-off (:class:`guard.KeepOff`); None:
+            not known.
 
         Returns
         -------
@@ -225,6 +231,12 @@ class QLearningController(WeightReadout):
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
             u = np.clip(self._policy_u(phi, x) + noise, -limit, limit)
+        if nearest is not None and nearest[0] < self.config.keep_off and x.size >= 2 + self.m:
+            scale = self._force_scale(self.critic.window.samples()[4])
+            u = np.clip(self._keep_off(u, x[2:2 + self.m], nearest[0], nearest[1], scale),
+                        -limit, limit)
+        else:
+            self._keep_off.release()
         if self.robust:
             d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.leg_index
             self._noise_d = self._probing_d.sample(d_std)
@@ -232,6 +244,7 @@ class QLearningController(WeightReadout):
         self._prev = (tau, x, u)  # the applied force: the rows stay right when u saturates
         events, self._events = self._events, []
         self.info = StepInfo(tau=tau, e_c1=e_c1, e_c2=e_c2, e_a=e_a, e_d=e_d, probing=noise,
+                             keep_off=self._keep_off.push,
                              policy_event=';'.join(e.value for e, _ in events),
                              policy_reason='; '.join(r for _, r in events))
         return u

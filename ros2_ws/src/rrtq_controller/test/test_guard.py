@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from rrtq_controller.config import ControllerConfig, SafeHold
-from rrtq_controller.guard import Brake, DivergenceWatch, PolicyEvent, held_below, trust_step
+from rrtq_controller.guard import (Brake, DivergenceWatch, KeepOff, PolicyEvent, held_below,
+                                   trust_step)
 from rrtq_controller.q_learning import QLearningController
 from rrtq_testing import controller_reference as ref
 
@@ -340,3 +341,52 @@ def test_a_leg_that_leaves_its_line_brakes_to_rest_and_keeps_the_policy_that_com
     assert np.allclose(ctrl.gain(T), good, rtol=1e-6, atol=1e-6)   # the policy is kept
     assert max(speeds[1:]) <= 2.0 + 1e-9                            # the brake only slows
     assert np.linalg.norm(x[:2]) < 0.5                              # the policy took over again
+
+
+@pytest.mark.parametrize('mass, damping, limit, v0', [(110.0, 15.0, 200.0, 0.5), (10.0, 5.0, 1000.0, 1.0),
+                                                      (60.0, 40.0, 300.0, 0.8), (120.0, 8.0, 150.0, 0.3)])
+def test_keep_off_stops_an_approach_before_contact_within_the_limit(mass, damping, limit, v0):
+    """A rover 0.3 m from a wall (x = 0), approaching it at v0 while its policy pushes it
+    on at a fifth of the limit: the keep-off turns it back before contact, every command
+    within the limit, the tangential command untouched; no model of the plant is used."""
+    A, B = ref.rover(mass=mass, stiffness=0.0, damping=damping)
+    plant = ref.Plant(A, B, DT)
+    keep = KeepOff(zone=0.3, limit=limit, dt=DT)
+    x = np.array([-0.3 + 1e-6, 0.0, v0, 0.1])
+    policy = np.array([0.2 * limit, 3.0])                 # toward the wall, and along it
+    closest, umax = 0.3, 0.0
+    for _ in range(int(6.0 / DT)):
+        u = np.clip(keep(policy, x[2:], -x[0], np.array([-1.0, 0.0]), 20.0), -limit, limit)
+        assert u[1] == policy[1]                          # the tangential part is left alone
+        umax = max(umax, float(np.abs(u).max()))
+        x = plant.step(x, u)
+        closest = min(closest, -x[0])
+    assert closest > 0.0 and umax <= limit
+    assert abs(x[2]) <= 0.05                              # held off, at rest along n
+
+
+def test_keep_off_leaves_the_command_alone_out_of_the_zone_or_moving_away():
+    keep = KeepOff(zone=0.3, limit=100.0, dt=DT)
+    u = np.array([50.0, -5.0])
+    n = np.array([-1.0, 0.0])
+    assert np.array_equal(keep(u, np.array([1.0, 0.0]), 0.5, n, 10.0), u)     # out of the zone
+    assert np.array_equal(keep(-u, np.array([-1.0, 0.0]), 0.1, n, 10.0), -u)  # moving away
+    held = keep(u, np.array([-1.0, 0.0]), 0.1, n, 10.0)   # moving away, pushed toward it
+    assert held[0] == 0.0 and held[1] == u[1]
+    assert np.array_equal(keep(u, np.array([1.0, 0.0]), 0.1, np.zeros(2), 10.0), u)  # no direction
+    pushed = keep(u, np.array([1.0, 0.0]), 0.1, n, 10.0)                      # approaching
+    assert pushed[0] == pytest.approx(-10.0) and keep.push == pytest.approx(60.0)
+
+
+def test_the_controller_applies_the_keep_off_and_learns_from_the_force_applied():
+    """QLearningController.step with the nearest obstacle: the push is in the command, in
+    StepInfo, and in the force the next Bellman row is built from."""
+    cfg = ControllerConfig(force_limit=200.0, probing_std=0.0, keep_off=0.3)
+    ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(0))
+    ctrl.start_leg(np.array([-4.0, 0.0, 0.0, 0.0]), 0.0)
+    x = np.array([-3.0, 0.0, 0.0, -0.4])                  # approaching an obstacle below it
+    u = ctrl.step(0.0, x, nearest=(0.1, np.array([0.0, 1.0])))
+    assert u[1] > 0.0 and ctrl.info.keep_off > 0.0
+    assert np.array_equal(ctrl._prev[2], u)
+    free = ctrl.step(DT, x, nearest=(2.0, np.array([0.0, 1.0])))
+    assert ctrl.info.keep_off == 0.0 and free[1] == 0.0

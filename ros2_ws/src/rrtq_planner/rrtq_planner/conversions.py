@@ -135,7 +135,9 @@ def safety_status_msg(header: Header, step: SafetyStep, margin: MarginStatus) ->
         bound=float(margin.bound), confidence=float(margin.confidence),
         samples=int(margin.samples), violations=int(margin.violations),
         bound_violations=int(margin.bound_violations),
-        leg_deviation=float(margin.leg_deviation), legs=int(margin.legs))
+        leg_deviation=float(margin.leg_deviation), legs=int(margin.legs),
+        obstacle_distance=float(step.obstacle_distance),
+        obstacle_direction=Vector3(x=step.obstacle_direction[0], y=step.obstacle_direction[1]))
     status.header = header
     return status
 

@@ -117,6 +117,12 @@ class SafetyStep:
     leg_index: int
     local_margins: dict[str, float] = dataclasses.field(default_factory=dict)
     """m, robot radius included: each obstacle's own margin when the policy gives one."""
+    obstacle_distance: float = math.inf
+    """m, from the robot's disc to the nearest *detected* obstacle (the robot's map, not
+    the truth; < 0: overlap; inf: none): what the controller's keep-off acts on."""
+    obstacle_direction: tuple[float, float] = (0.0, 0.0)
+    """Unit vector from that obstacle's nearest point to the robot (zero when none, or
+    when the robot's centre is inside it)."""
 
 
 class SafetyMonitor:
@@ -138,6 +144,7 @@ class SafetyMonitor:
         self.collided = False
         self._detected: Obstacles = []
         self._detected_stamp: int | None = None
+        self._detected_set = PolygonSet([])
         self._published = PolygonSet([])
         self._augmented_stamp = 0
         self._existing = LivePolygons()
@@ -238,6 +245,7 @@ class SafetyMonitor:
         if detected is not None and changed:
             self._detected_stamp = detected.stamp_ns
             self._detected = detected.read()
+            self._detected_set = PolygonSet([poly for _, poly in self._detected])
         grown = False
         if policy is not None:
             grown = self.follow(*policy)
@@ -259,12 +267,16 @@ class SafetyMonitor:
             nearest = existing[index].id if index >= 0 else ''
         new_collision = gap < 0.0 and not self.collided
         self.collided = self.collided or new_collision
+        near, direction = nearest_obstacle(p, self._detected_set,
+                                           [poly for _, poly in self._detected],
+                                           self.config.robot_radius)
         return SafetyStep(
             augmented=augmented, augmented_stamp_ns=self._augmented_stamp, d_rob=self.d_rob,
             d_rob_max=self.d_rob_max, margin=self.margin, clearance=float(gap),
             nearest=nearest, collision=self.collided, new_collision=new_collision,
             leg_index=leg.index if leg is not None and leg.d0 > 0.0 else 0,
-            local_margins=dict(self._published_local))
+            local_margins=dict(self._published_local), obstacle_distance=near,
+            obstacle_direction=direction)
 
 
 def clearance(position: npt.ArrayLike, polygons: PolygonSet | Sequence[np.ndarray],
@@ -277,3 +289,26 @@ def clearance(position: npt.ArrayLike, polygons: PolygonSet | Sequence[np.ndarra
     shapes = polygons if isinstance(polygons, PolygonSet) else PolygonSet(polygons)
     value, index = shapes.nearest(np.asarray(position, dtype=float)[:2])
     return value - robot_radius, index
+
+
+def nearest_obstacle(position: npt.ArrayLike, polygons: PolygonSet,
+                     rings: Sequence[np.ndarray],
+                     robot_radius: float) -> tuple[float, tuple[float, float]]:
+    """The robot disc's distance (m) to the nearest polygon, and the unit vector to the robot.
+
+    ``polygons`` is the :class:`PolygonSet` of ``rings`` (the same polygons, in order).
+    The direction points from the polygon's nearest boundary point to the robot's centre
+    (away from the obstacle); (0, 0) when there is no polygon or the centre is inside one.
+    """
+    p = np.asarray(position, dtype=float)[:2]
+    value, index = polygons.nearest(p)
+    if index < 0:
+        return math.inf, (0.0, 0.0)
+    if value <= 0.0:
+        return value - robot_radius, (0.0, 0.0)
+    ring = shapely.LinearRing(rings[index])
+    closest = ring.interpolate(ring.project(shapely.Point(p)))
+    away = p - np.array([closest.x, closest.y])
+    norm = float(np.hypot(*away))
+    direction = (0.0, 0.0) if norm < 1e-12 else (float(away[0] / norm), float(away[1] / norm))
+    return value - robot_radius, direction

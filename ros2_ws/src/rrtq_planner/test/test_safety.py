@@ -103,3 +103,23 @@ def test_augmentation_never_swallows_the_robot():
     assert shapely.Polygon(near).distance(shapely.Point(robot)) == pytest.approx(0.05, abs=0.01)
     assert shapely.Polygon(free).hausdorff_distance(
         shapely.Polygon(augment(SQUARE + [20.0, 0.0], 1.5))) < 1e-9   # far ones: full margin
+
+
+def test_nearest_detected_obstacle_distance_and_direction_match_shapely():
+    """What the controller's keep-off acts on: the robot disc's distance to the nearest
+    detected polygon and the unit vector from its nearest point to the robot."""
+    from rrtq_common.polygon_set import PolygonSet
+    from rrtq_planner.safety import nearest_obstacle
+    polys = [SQUARE, SQUARE + [5.0, 0.0], np.array([[0.0, 4.0], [2.0, 6.0], [-1.0, 6.0]])]
+    shapes = PolygonSet(polys)
+    rng = np.random.default_rng(5)
+    for p in rng.uniform(-3, 8, (200, 2)):
+        d, n = nearest_obstacle(p, shapes, polys, 0.2)
+        exact = min(shapely.Polygon(q).distance(shapely.Point(p)) for q in polys)
+        if exact == 0.0:
+            assert d <= -0.2 + 1e-9 and n == (0.0, 0.0)
+            continue
+        assert d == pytest.approx(exact - 0.2, abs=1e-9)
+        foot = np.asarray(p) - (exact * np.asarray(n))       # back along n: on the obstacle
+        assert min(shapely.Polygon(q).exterior.distance(shapely.Point(foot)) for q in polys) < 1e-9
+    assert nearest_obstacle([0.0, 0.0], PolygonSet([]), [], 0.2) == (math.inf, (0.0, 0.0))
