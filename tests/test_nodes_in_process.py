@@ -243,3 +243,32 @@ def test_controller_commands_zero_when_odometry_goes_stale(ros):
     spin_until(executor, lambda: False, 1.0)                # no odometry for 1 s
     assert len(cmds) >= 3
     assert all((m.wrench.force.x, m.wrench.force.y) == (0.0, 0.0) for m in cmds.messages[1:])
+
+
+def test_controller_keeps_off_the_obstacle_the_safety_status_reports(ros):
+    """The wiring of the keep-off: the robot moves toward its waypoint (3, 0) at 0.5 m/s,
+    the policy pushes it on; a /safety/status with a detected obstacle 0.1 m ahead (its
+    direction to the robot -x) turns the command back, and ControllerState.keep_off says
+    by how much."""
+    from geometry_msgs.msg import Vector3
+    from rrtq_msgs.msg import SafetyStatus
+    context, executor, _ = ros
+    node = learning_controller(context)
+    cmds, odom_pub = drive_with_plan(context, executor, node)
+    driver = [n for n in executor.get_nodes() if n.get_name() == 'driver'][0]
+    states = Collector(driver, ControllerState, '/controller/state', qos.STREAM)
+    safety_pub = driver.create_publisher(SafetyStatus, '/safety/status', qos.STREAM)
+    assert spin_until(executor, lambda: node.count_publishers('/odom') >= 1
+                      and 'plan' in node.gate.latest, 10.0)
+    moving = np.array([0.0, 0.0, 0.5, 0.0])
+    odom_pub.publish(conv.odometry_msg(0, moving))
+    wait_for_messages(executor, cmds, 1)
+    assert cmds.messages[0].wrench.force.x > 1.0                 # toward x = 3
+    safety_pub.publish(SafetyStatus(obstacle_distance=0.1,
+                                    obstacle_direction=Vector3(x=-1.0, y=0.0)))
+    assert spin_until(executor, lambda: 'safety' in node.gate.latest, 10.0)
+    odom_pub.publish(conv.odometry_msg(50_000_000, moving))
+    wait_for_messages(executor, cmds, 2)
+    wait_for_messages(executor, states, 2)
+    assert cmds.messages[1].wrench.force.x < 0.0                 # pushed back, away from it
+    assert states.messages[1].keep_off > 0.0

@@ -119,7 +119,8 @@ class DivergenceWatch:
     leg is measured from its own start, restarted or not; a leg no longer than
     ``deviation`` (holding station, or a robot told to stop where it is while moving) has
     no line at that scale and is not watched for it.
-    It trips at most once per leg.
+    It trips at most once per leg (the controller starts it afresh where a brake has
+    stopped the robot).
     """
 
     distance: float

@@ -80,6 +80,9 @@ class QLearningController(WeightReadout):
         self._initial = (self._Wa.copy(), self._Wd.copy())
         self._completed: tuple[Array, Array] | None = None
         self._adopted_since = False
+        self._spared = False
+        """Whether the completed policy has already been kept through a line-watch brake
+        it was blamed for (it is not a second time, until a leg completes)."""
         """Whether a target was adopted since a leg last completed."""
         """The actors' weights when a leg last entered its window (the revert point)."""
         self._watch = DivergenceWatch(c.divergence_distance, c.divergence_floor,
@@ -166,7 +169,7 @@ class QLearningController(WeightReadout):
         Its policy becomes the one a diverging leg reverts to.
         """
         self._completed = (self._Wa.copy(), self._Wd.copy())
-        self._adopted_since = False
+        self._adopted_since = self._spared = False
 
     def time_to_go(self, t: float) -> float:
         """τ = T - (t - t_leg), s, clipped at 0."""
@@ -226,6 +229,7 @@ class QLearningController(WeightReadout):
         if self._braking and (t >= self._brake_until or self._brake.at_rest and (
                 self._completed is not None or self._t0 > self._brake_started)):
             self._braking = False   # at rest: a policy that completed a leg, or a new leg
+            self._watch.start(x)    # watched afresh from where it stopped (it trips once a leg)
         if self._braking:
             noise = np.zeros(self.m)
             u = np.clip(self._brake(x, self.m), -limit, limit)
@@ -411,17 +415,24 @@ class QLearningController(WeightReadout):
         from the probing scale or the RMS force of the stored data): the robot is stopped
         where it is, and the initial policy takes over again at the next leg. ``brake``
         (a leg that left its line, :class:`guard.DivergenceWatch`) brakes in either case and
-        keeps the completed policy: a turn sharper than any before leaves the line under a
-        good policy too.
+        keeps the completed policy once: a turn sharper than any before leaves the line
+        under a good policy too. A second such brake under it, with no leg completed in
+        between, discards it: seen on the heavy rover, a policy that had completed a leg
+        along y had a negative gain along x, and kept through brake after brake it drove
+        the robot 1 km off the map at the force limit.
         A brake lasts until the robot is at rest, at most a horizon from ``t`` (s).
         """
-        if self._completed is not None and not self._adopted_since and not brake:
-            self._completed = None   # off its line, the robot may have turned too fast
+        if self._completed is not None and not self._adopted_since:
+            if brake and not self._spared:
+                self._spared = True      # off its line: the robot may have turned too fast
+            else:
+                self._completed = None   # it is the policy that diverged
         event = PolicyEvent.REVERTED if self._completed is not None else PolicyEvent.HOLD
         Wa, Wd = self._completed if self._completed is not None else self._initial
         self._Wa, self._Wd = Wa.copy(), Wd.copy()
         self._target = (Wa.copy(), Wd.copy())
         self._held = True
+        self._adopted_since = False      # the actors now run the policy reverted to
         if brake or (event is PolicyEvent.HOLD and self.config.safe_hold is SafeHold.BRAKE):
             self._braking = True
             self._brake_started, self._brake_until = t, t + self.config.horizon

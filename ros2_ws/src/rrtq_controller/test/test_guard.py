@@ -390,3 +390,29 @@ def test_the_controller_applies_the_keep_off_and_learns_from_the_force_applied()
     assert np.array_equal(ctrl._prev[2], u)
     free = ctrl.step(DT, x, nearest=(2.0, np.array([0.0, 1.0])))
     assert ctrl.info.keep_off == 0.0 and free[1] == 0.0
+
+
+def test_a_completed_policy_that_leaves_its_line_twice_is_discarded():
+    """Seen on the heavy rover: a policy that completed a leg along y had a negative gain
+    along x. Kept through each line-watch brake, it drove the robot 1 km off the map at
+    the force limit. It is now kept through one brake; the second, with no leg completed
+    in between, discards it for the hold, and the robot stays near where it was."""
+    A, B = ref.rover(mass=110.0, stiffness=0.0, damping=15.0)
+    plant = ref.Plant(A, B, DT)
+    cfg = ControllerConfig(force_limit=200.0, probing_std=0.0)
+    ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(0))
+    bad = np.array([[-20.0, 0.0, -10.0, 0.0], [0.0, 20.0, 0.0, 60.0]])   # pushes away along x
+    ctrl.start_leg(np.array([0.0, -4.0, 0.0, 0.0]), 0.0)
+    ctrl.set_weights(actor=np.vstack([-bad.T, np.zeros(((ctrl.time_basis.size - 1) * 4, 2))]))
+    ctrl.completed_leg()
+    x, t, events = np.array([-4.0, 0.3, 0.0, 0.0]), 10.0, []
+    for _ in range(4):                                    # legs along x, the bad axis
+        ctrl.start_leg(x, t, completed=False)
+        for _ in range(int(10.0 / DT)):
+            u = ctrl.step(t, x)
+            if ctrl.info.policy_event:
+                events.append(ctrl.info.policy_event)
+            x, t = plant.step(x, u), t + DT
+    assert events[:2] == ['reverted', 'hold'], events
+    assert not np.allclose(ctrl.gain(T), bad)             # the bad policy is gone
+    assert np.linalg.norm(x[:2]) < 10.0                   # kept on the bad policy: metres away
