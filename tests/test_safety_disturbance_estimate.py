@@ -114,3 +114,17 @@ def test_a_bump_inside_the_supported_region_is_learned_within_the_band(run):
         read_estimates(recording))
     assert margins['field_supported_cells'] == len(supported)
     assert margins['field_covered'] >= 0.95
+
+
+def test_the_published_margin_covers_the_realised_deviations_from_the_recording_alone(run):
+    """Issue 11's closed-loop check on this run: each leg's deviation recomputed from /odom
+    and the controller's legs (rrtq_bringup.margin_coverage, not the node's own count),
+    against the least margin published while it ran; the miss rate is compatible with
+    δ = 0.05 (lower end of its 95 % Clopper-Pearson interval), and the robot met nothing."""
+    from rrtq_bringup.margin_coverage import coverage
+    cov = coverage([run / 'run.mcap'])
+    assert cov.mode == 'learned_bound' and cov.delta == pytest.approx(0.05)
+    assert len(cov.legs) >= 5, cov.as_dict()
+    assert cov.passed, cov.as_dict()
+    assert all(leg.margin > 0.0 for leg in cov.legs)        # a margin was published for each
+    assert not statuses(run / 'run.mcap')[-1].collision
