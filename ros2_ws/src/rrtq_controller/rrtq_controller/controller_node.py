@@ -13,7 +13,8 @@ statistics of the same step, and the plan they name when it changed, and the saf
 status of the same step (learning variants; the keep-off); the disturbance that acted
 over the previous step (robust variant, which learns the game from the measured
 disturbance); the guidance reference of the same step and the augmented obstacle set it
-names (vf_lpc, which tracks the reference and puts its barrier on those obstacles). Paced mode uses whatever arrived last.
+names (vf_lpc, which tracks the reference and puts its barrier on those obstacles). Paced
+mode uses whatever arrived last.
 """
 
 from __future__ import annotations
