@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from rrtq_planner.margins.bank import BoundBank
-from rrtq_planner.margins.tube import (closed_loop, leg_tube_terms, nominal_deviation,
-                                       nominal_path, random_deviation, tube_gains)
+from rrtq_planner.margins.tube import (closed_loop, expanding, leg_tube_terms,
+                                       nominal_deviation, nominal_path, random_deviation,
+                                       tube_gains)
 from rrtq_testing import controller_reference as ref
 
 
@@ -154,3 +155,22 @@ def test_nominal_path_is_the_simulated_response():
         assert dev[k] == pytest.approx(abs(line[0] * xbar[1] - line[1] * xbar[0]), abs=1e-12)
     assert dev.max() == pytest.approx(float(nominal_deviation(
         plant.Ad, plant.Gd, np.zeros((4, 2)), gains, start[None], target[None])[0]))
+
+
+def test_an_expanding_learned_closed_loop_is_flagged_and_the_true_rovers_is_not():
+    """The tube through a closed loop that expands bounds nothing (an early model with a mode
+    of radius 1.05 gave margins of 1e9 m); the true rover's, even at the zero gain where
+    the position has an eigenvalue of exactly 1, is not flagged, nor a little noise on it."""
+    dt, N = 0.05, 200
+    A, B = ref.rover(mass=40.0, stiffness=0.0, damping=45.0)
+    phi, gamma = ref.zoh(A, B, dt)
+    zero = np.zeros((N, 2, 4))
+    pd = np.tile(np.array([[40.0, 0, 30.0, 0], [0, 40.0, 0, 30.0]]), (N, 1, 1))
+    assert not expanding(phi, gamma, zero) and not expanding(phi, gamma, pd)
+    noisy = phi + 1e-3 * np.random.default_rng(0).standard_normal(phi.shape)
+    assert not expanding(noisy, gamma, zero)
+    bad = phi.copy()
+    bad[0, 0] = 1.05                                      # a position that grows 5 % a step
+    assert expanding(bad, gamma, zero)
+    assert tube_gains(bad, gamma, zero, np.ones(4)).max() > 100 * tube_gains(
+        phi, gamma, zero, np.ones(4)).max()               # what its tube would have said

@@ -36,7 +36,7 @@ from rrtq_common.settings import check, setting
 from .bank import BoundBank
 from .policy import LegTracker, MarginMode, MarginSample, MarginStatus
 from .regression import FieldFit, FieldStatistics, RBFFeatures, fit_field
-from .tube import (leg_spread, leg_tube_terms, nominal_deviation, nominal_path,
+from .tube import (expanding, leg_spread, leg_tube_terms, nominal_deviation, nominal_path,
                    position_covariance)
 
 __all__ = ['ModelFrame', 'LearnedBoundConfig', 'LearnedBoundPolicy', 'FieldEstimate']
@@ -560,6 +560,11 @@ class LearnedBoundPolicy:
         taus = np.maximum(sample.horizon - self.config.dt * (elapsed + np.arange(steps)), 0.0)
         gains = np.stack([np.asarray(sample.gain(float(tau)), dtype=float) for tau in taus])
         phi, gamma = self.theta[:, :self.n], self.theta[:, self.n:]
+        if expanding(phi, gamma, gains):
+            # The model's closed loop expands: its tube bounds nothing; the margin falls back
+            # to the initial one (the running max) until a fit gives a contracting model.
+            self.tube = None
+            return
         offset = np.zeros((self.n, 2))
         if self.config.frame is ModelFrame.WORLD_ORIGIN:
             offset = (phi - np.eye(self.n))[:, :2]
