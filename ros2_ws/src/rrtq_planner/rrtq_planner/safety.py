@@ -144,6 +144,7 @@ class SafetyMonitor:
         self.collided = False
         self._detected: Obstacles = []
         self._detected_stamp: int | None = None
+        self._detected_rings: list[np.ndarray] = []
         self._detected_set = PolygonSet([])
         self._published = PolygonSet([])
         self._augmented_stamp = 0
@@ -245,7 +246,8 @@ class SafetyMonitor:
         if detected is not None and changed:
             self._detected_stamp = detected.stamp_ns
             self._detected = detected.read()
-            self._detected_set = PolygonSet([poly for _, poly in self._detected])
+            self._detected_rings = [poly for _, poly in self._detected]
+            self._detected_set = PolygonSet(self._detected_rings)
         grown = False
         if policy is not None:
             grown = self.follow(*policy)
@@ -267,8 +269,7 @@ class SafetyMonitor:
             nearest = existing[index].id if index >= 0 else ''
         new_collision = gap < 0.0 and not self.collided
         self.collided = self.collided or new_collision
-        near, direction = nearest_obstacle(p, self._detected_set,
-                                           [poly for _, poly in self._detected],
+        near, direction = nearest_obstacle(p, self._detected_set, self._detected_rings,
                                            self.config.robot_radius)
         return SafetyStep(
             augmented=augmented, augmented_stamp_ns=self._augmented_stamp, d_rob=self.d_rob,
