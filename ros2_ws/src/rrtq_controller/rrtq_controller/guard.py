@@ -197,6 +197,16 @@ class DivergenceWatch:
         return 0.0 if self.line is None else ray_distance(self.line, (0.0, 0.0), x)
 
 
+def slowing_too_little(speed: float, before: float, dt: float, stop_time: float,
+                       rest_speed: float) -> bool:
+    """Whether a speed that was ``before`` one step ago fell too little to stop in ``stop_time``.
+
+    The rule by which :class:`Brake` and :class:`KeepOff` double their force: above
+    ``rest_speed``, the speed must fall by at least speed Δt / ``stop_time`` per step.
+    """
+    return speed > rest_speed and speed > before * (1.0 - dt / stop_time)
+
+
 @dataclass
 class Brake:
     """The safe hold: a bounded force against the measured velocity, adapted on line.
@@ -248,7 +258,7 @@ class Brake:
             before = float(np.linalg.norm(self.prev))
             if float(v @ self.prev) < 0.0:
                 self.force *= 0.5
-            elif speed > self.rest_speed and speed > before * (1.0 - self.dt / self.stop_time):
+            elif slowing_too_little(speed, before, self.dt, self.stop_time, self.rest_speed):
                 self.force = min(2.0 * self.force, self.limit)
         self.prev = v.copy()
         self.at_rest = speed <= self.rest_speed
@@ -271,8 +281,8 @@ class KeepOff:
       along n is raised to at least 0), and while the robot approaches it (a = -v · n > 0)
       to at least +F, a push away; the tangential part of the command, and any stronger
       push away, are left alone;
-    * F starts at the force :meth:`engage` is given (the probing scale, or the forces the
-      robot has been pushed with) and doubles, up to ``limit``, while the approach speed
+    * F starts at the force ``scale()`` gives when an engagement starts (the probing scale,
+      or the forces the robot has been pushed with) and doubles, up to ``limit``, while the approach speed
       does not fall fast enough to stop within the time to contact c / a; it halves when
       the approach has reversed (the robot moves away: no push then), and the push is
       proportional to a below ``rest_speed`` (no full push at sensor noise);
@@ -294,11 +304,12 @@ class KeepOff:
     """N: how much the last step raised the command along n (0: not acting)."""
 
     def __call__(self, u: Array, velocity: Array, distance: float, direction: Array,
-                 scale: float) -> Array:
+                 scale: Callable[[], float]) -> Array:
         """The command u (m,) with its approach component replaced by a push, if needed.
 
         ``velocity`` (m,) the robot's, ``distance`` (m) and ``direction`` (unit, m) of the
-        nearest detected obstacle, ``scale`` (N) the force a new engagement starts from.
+        nearest detected obstacle; ``scale()`` (N) the force a new engagement starts from,
+        asked only then.
         """
         u = np.asarray(u, dtype=float)
         n = np.asarray(direction, dtype=float)[:u.size]
@@ -314,10 +325,10 @@ class KeepOff:
             self.prev = None
         else:
             if self.force <= 0.0:
-                self.force = min(max(scale, 1.0), self.limit)
+                self.force = min(max(scale(), 1.0), self.limit)
             elif self.prev is not None:
-                contact = max(distance, 0.0) / a   # s to contact at the current speed
-                if a > self.rest_speed and a > self.prev * (1.0 - self.dt / max(contact, self.dt)):
+                contact = max(distance, self.dt * a) / a   # s to contact at this speed, >= Δt
+                if slowing_too_little(a, self.prev, self.dt, contact, self.rest_speed):
                     self.force = min(2.0 * self.force, self.limit)
             self.prev = a
             want = self.force * min(1.0, a / self.rest_speed)

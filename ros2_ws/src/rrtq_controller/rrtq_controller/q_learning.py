@@ -236,8 +236,8 @@ class QLearningController(WeightReadout):
         else:
             u = np.clip(self._policy_u(phi, x) + noise, -limit, limit)
         if nearest is not None and nearest[0] < self.config.keep_off and x.size >= 2 + self.m:
-            scale = self._force_scale(self.critic.window.samples()[4])
-            u = np.clip(self._keep_off(u, x[2:2 + self.m], nearest[0], nearest[1], scale),
+            u = np.clip(self._keep_off(u, x[2:2 + self.m], nearest[0], nearest[1],
+                                       lambda: self._force_scale(self.critic.window.samples()[4])),
                         -limit, limit)
         else:
             self._keep_off.release()

@@ -356,7 +356,7 @@ def test_keep_off_stops_an_approach_before_contact_within_the_limit(mass, dampin
     policy = np.array([0.2 * limit, 3.0])                 # toward the wall, and along it
     closest, umax = 0.3, 0.0
     for _ in range(int(6.0 / DT)):
-        u = np.clip(keep(policy, x[2:], -x[0], np.array([-1.0, 0.0]), 20.0), -limit, limit)
+        u = np.clip(keep(policy, x[2:], -x[0], np.array([-1.0, 0.0]), lambda: 20.0), -limit, limit)
         assert u[1] == policy[1]                          # the tangential part is left alone
         umax = max(umax, float(np.abs(u).max()))
         x = plant.step(x, u)
@@ -369,12 +369,12 @@ def test_keep_off_leaves_the_command_alone_out_of_the_zone_or_moving_away():
     keep = KeepOff(zone=0.3, limit=100.0, dt=DT)
     u = np.array([50.0, -5.0])
     n = np.array([-1.0, 0.0])
-    assert np.array_equal(keep(u, np.array([1.0, 0.0]), 0.5, n, 10.0), u)     # out of the zone
-    assert np.array_equal(keep(-u, np.array([-1.0, 0.0]), 0.1, n, 10.0), -u)  # moving away
-    held = keep(u, np.array([-1.0, 0.0]), 0.1, n, 10.0)   # moving away, pushed toward it
+    assert np.array_equal(keep(u, np.array([1.0, 0.0]), 0.5, n, lambda: 10.0), u)     # out of the zone
+    assert np.array_equal(keep(-u, np.array([-1.0, 0.0]), 0.1, n, lambda: 10.0), -u)  # moving away
+    held = keep(u, np.array([-1.0, 0.0]), 0.1, n, lambda: 10.0)   # moving away, pushed toward it
     assert held[0] == 0.0 and held[1] == u[1]
-    assert np.array_equal(keep(u, np.array([1.0, 0.0]), 0.1, np.zeros(2), 10.0), u)  # no direction
-    pushed = keep(u, np.array([1.0, 0.0]), 0.1, n, 10.0)                      # approaching
+    assert np.array_equal(keep(u, np.array([1.0, 0.0]), 0.1, np.zeros(2), lambda: 10.0), u)  # no direction
+    pushed = keep(u, np.array([1.0, 0.0]), 0.1, n, lambda: 10.0)                      # approaching
     assert pushed[0] == pytest.approx(-10.0) and keep.push == pytest.approx(60.0)
 
 
