@@ -141,6 +141,8 @@ class DivergenceWatch:
     line: Array | None = None
     """The current leg's start seen from its target, x̄0[:2] (None before the first leg)."""
     line_limit: float = math.inf
+    leg_d0: float = math.inf
+    """The current leg's own D0 (the reference's is :attr:`d0`)."""
 
     def start(self, x0: Array, renew: bool = True, moved: Array | None = None) -> None:
         """A new leg from x̄0; ``renew`` makes it the reference.
@@ -148,10 +150,20 @@ class DivergenceWatch:
         ``moved``: how far the target moved from the previous leg's (state units; None
         when the caller does not know, then D is the distance to the current target). A
         reference leg that started on its target (D0 = 0: the robot at rest before the
-        first plan) is no reference; the next leg replaces it in any case.
+        first plan) is no reference; the next leg replaces it in any case. A leg that ends
+        with the robot nearer its own target than it started (‖x̄0 + moved‖ < its D0) made
+        progress, and the new leg becomes the reference too: a robot that follows a plan
+        whose waypoints a new plan keeps replacing before it reaches them is not running
+        away, though it gets ever farther from the old reference's target (seen on a
+        120 kg rover: D = 7.5 m from a target three replans back, 2 D0 + 1 = 7.45, on a
+        leg whose own D had fallen from 4.4 to 1.7 m; the hold threw away the policy).
         """
+        x0 = np.asarray(x0, dtype=float)
+        if not renew and moved is not None and self.line is not None:
+            renew = float(np.linalg.norm(x0 + np.asarray(moved, dtype=float))) < self.leg_d0
         self.tripped = self.off_line = False
-        self.line = np.asarray(x0, dtype=float)[:2].copy()
+        self.line = x0[:2].copy()
+        self.leg_d0 = float(np.linalg.norm(x0))
         short = float(np.linalg.norm(self.line)) <= self.deviation   # no line at that scale
         self.line_limit = math.inf if short else self.widest + self.deviation
         if not renew and self.d0 > 1e-9:

@@ -216,6 +216,36 @@ def test_a_new_plan_to_a_farther_waypoint_is_not_a_robot_running_away():
     assert 'D =' in unknown.check(x_new)
 
 
+def test_a_robot_that_follows_replanned_waypoints_is_not_running_away():
+    """Seen on a 120 kg rover: new plans kept replacing the robot's waypoint before it
+    reached it (no leg completed), and measured from the target three replans back the
+    robot was D = 7.5 m away, past 2 D0 + 1 = 7.45, on a leg whose own D had fallen from
+    4.4 to 1.7 m: the watch held and the policy was thrown away. A leg that ends nearer
+    its target than it started made progress and the next leg is the reference; a robot
+    that gets farther from its target is still measured from the old one."""
+    watch = DivergenceWatch(distance=2.0, floor=1.0, speed=4.0, horizon=10.0)
+    target = np.array([3.0, 0.0])
+    robot = np.zeros(2)
+    watch.start(np.array([*(robot - target), 0.0, 0.0]))
+    for _ in range(6):                                   # 2 m of each 3 m leg, then a replan
+        robot = robot + 2.0 * (target - robot) / np.linalg.norm(target - robot)
+        x = np.array([*(robot - target), 0.5, 0.0])
+        assert watch.check(x) == ''
+        new_target = target + np.array([2.0, 2.0])
+        watch.start(np.array([*(robot - new_target), 0.5, 0.0]), renew=False,
+                    moved=np.array([*(new_target - target), 0.0, 0.0]))
+        target = new_target
+    assert np.linalg.norm(robot) > 3.0 * (2.0 * 3.0 + 1.0) / 2.0  # far past the first reference
+    assert watch.check(np.array([*(robot - target), 0.5, 0.0])) == ''
+    # a leg that ended farther from its target than it started: the reference stays
+    away = DivergenceWatch(distance=2.0, floor=1.0, speed=4.0, horizon=10.0)
+    away.start(np.array([-3.0, 0.0, 0.0, 0.0]))          # target 3 m ahead
+    x_end = np.array([-4.5, 0.0, -0.5, 0.0])             # 1.5 m backwards
+    moved = np.array([0.0, 2.0, 0.0, 0.0])
+    away.start(x_end - moved, renew=False, moved=moved)
+    assert 'D =' in away.check(x_end - moved + np.array([-3.0, 0.0, -0.5, 0.0]))
+
+
 def _coast_after_hold(safe_hold, mass, damping, limit, v0=2.5, seconds=8.0):
     """A leg whose first policy runs away before any policy completed a leg: the watch
     trips and holds. Returns (distance travelled after the hold, largest |u|, speeds).
