@@ -90,7 +90,7 @@ class QLearningController(WeightReadout):
                                       deviation=c.divergence_deviation)
         self._held = False
         self._brake = Brake(c.force_limit, c.hold_stop_time, c.dt)
-        self._keep_off = KeepOff(c.keep_off, c.force_limit, c.dt)
+        self._keep_off = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time)
         self._braking = False
         """Whether the robot is being braked (a HOLD with ``safe_hold: brake``, or a leg that
         left its line): until the robot is at rest, at most T, and then only on a policy
@@ -235,7 +235,8 @@ class QLearningController(WeightReadout):
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
             u = np.clip(self._policy_u(phi, x) + noise, -limit, limit)
-        if nearest is not None and nearest[0] < self.config.keep_off and x.size >= 2 + self.m:
+        if (nearest is not None and x.size >= 2 + self.m and self.config.keep_off > 0.0
+                and nearest[0] < self._keep_off.reach(x[2:2 + self.m], nearest[1])):
             u = np.clip(self._keep_off(u, x[2:2 + self.m], nearest[0], nearest[1],
                                        lambda: self._force_scale(self.critic.window.samples()[4])),
                         -limit, limit)

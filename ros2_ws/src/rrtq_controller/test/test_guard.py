@@ -395,6 +395,56 @@ def test_keep_off_stops_an_approach_before_contact_within_the_limit(mass, dampin
     assert abs(x[2]) <= 0.05                              # held off, at rest along n
 
 
+def _approach(lead, mass, damping, limit, v0, start=1.5, seconds=8.0):
+    """A rover ``start`` m from a wall (x = 0) approaching it at v0 while its policy pushes
+    it on at a fifth of the limit. Returns (closest distance, largest |u|, final x)."""
+    A, B = ref.rover(mass=mass, stiffness=0.0, damping=damping)
+    plant = ref.Plant(A, B, DT)
+    keep = KeepOff(zone=0.3, limit=limit, dt=DT, lead=lead)
+    x = np.array([-start, 0.0, v0, 0.1])
+    policy = np.array([0.2 * limit, 3.0])
+    closest, umax = start, 0.0
+    for _ in range(int(seconds / DT)):
+        u = np.clip(keep(policy, x[2:], -x[0], np.array([-1.0, 0.0]), lambda: 20.0), -limit, limit)
+        assert u[1] == policy[1]
+        umax = max(umax, float(np.abs(u).max()))
+        x = plant.step(x, u)
+        closest = min(closest, -x[0])
+    return closest, umax, x
+
+
+@pytest.mark.parametrize('mass, damping, limit, v0', [(120.0, 8.0, 150.0, 0.8), (110.0, 15.0, 200.0, 1.2),
+                                                      (10.0, 5.0, 1000.0, 3.0)])
+def test_keep_off_looks_ahead_of_its_zone_at_the_approach_speed(mass, damping, limit, v0):
+    """Seen on a 120 kg rover at 150 N: it entered the 0.3 m zone at 0.8 m/s, more than it
+    can stop from there at the limit (0.26 m, and the push ramps up from the probing
+    scale), and touched the obstacle. Looking a second ahead at the approach speed, the
+    keep-off stops every such approach short of 0.2 m, within the limit;
+    looking nowhere ahead, the heavy rovers touch."""
+    closest, umax, x = _approach(1.0, mass, damping, limit, v0)
+    assert closest > 0.2 and umax <= limit
+    assert abs(x[2]) <= 0.05
+    if mass > 100.0:
+        assert _approach(0.0, mass, damping, limit, v0)[0] <= 0.0
+
+
+def test_keep_off_ahead_of_its_zone_leaves_an_approach_alone_that_slows_in_time():
+    """A robot that brakes on its own (its policy stops it 0.4 m from the obstacle) is not
+    pushed while it is ahead of the zone."""
+    keep = KeepOff(zone=0.3, limit=150.0, dt=DT, lead=1.0)
+    n = np.array([-1.0, 0.0])
+    x, v = -1.2, 0.8
+    for _ in range(int(4.0 / DT)):
+        u = np.array([-0.5 * 120.0 * v ** 2 / max(-x - 0.4, 1e-3), 0.0])   # stop at 0.4 m
+        out = keep(u, np.array([v, 0.0]), -x, n, lambda: 20.0)
+        assert np.array_equal(out, u) and keep.push == 0.0
+        v = max(v + out[0] / 120.0 * DT, 0.0)
+        x += v * DT
+        if v == 0.0:
+            break
+    assert -x > 0.3
+
+
 def test_keep_off_leaves_the_command_alone_out_of_the_zone_or_moving_away():
     keep = KeepOff(zone=0.3, limit=100.0, dt=DT)
     u = np.array([50.0, -5.0])
