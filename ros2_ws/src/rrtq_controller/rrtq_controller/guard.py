@@ -300,7 +300,10 @@ class KeepOff:
       proportional to a below ``rest_speed`` (no full push at sensor noise);
     * ahead of the zone, within ``lead`` seconds of it at the approach speed (from
       ``zone`` out to ``zone`` + ``lead`` a), it looks ahead, as Nav2's collision monitor
-      does with its time before collision: the command is left alone while the approach
+      does with its time before collision, when the robot heads at the obstacle (within
+      45° of its direction; obliquely it slides past a corner the plan skirts, and passing
+      such corners the look-ahead once acted in 13 of 20 runs and cost the legs up to 13 %
+      against the optimum): the command is left alone while the approach
       slows fast enough to stop before the zone (a deceleration of at least a² / 2g, g
       the gap to the zone, or per step a fall of a Δt / (2 g / a)), and once it does not,
       the push starts from ``scale()`` there and doubles by the same rule. A
@@ -326,11 +329,22 @@ class KeepOff:
     push: float = 0.0
     """N: how much the last step raised the command along n (0: not acting)."""
 
+    head_on: float = math.cos(math.pi / 4.0)
+    """The look-ahead is for approaches within 45° of head-on (a >= this |v|)."""
+
     def reach(self, velocity: Array, direction: Array) -> float:
-        """m: the distance within which it acts, ``zone`` + ``lead`` times the approach speed."""
+        """m: the distance within which it acts, ``zone`` + ``lead`` times the approach speed.
+
+        Only for a head-on approach: a robot moving obliquely toward the nearest point of an
+        obstacle mostly slides past it (a corner the plan skirts), and the zone alone
+        answers the approach component it does have.
+        """
         n = np.asarray(direction, dtype=float)
-        a = -float(np.asarray(velocity, dtype=float)[:n.size] @ n)
-        return self.zone + self.lead * max(a, 0.0)
+        v = np.asarray(velocity, dtype=float)[:n.size]
+        a = -float(v @ n)
+        if a < self.head_on * float(np.linalg.norm(v)):
+            return self.zone
+        return self.zone + self.lead * a
 
     def __call__(self, u: Array, velocity: Array, distance: float, direction: Array,
                  scale: Callable[[], float]) -> Array:
