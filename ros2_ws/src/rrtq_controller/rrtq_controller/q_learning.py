@@ -101,12 +101,6 @@ class QLearningController(WeightReadout):
         self.event_counts = {e: 0 for e in PolicyEvent}
         """How often each :class:`guard.PolicyEvent` happened."""
         self.leg_index = -1
-        self.probing_decays = 0
-        """Legs after which the probing decayed: every leg but one in which the guard
-        rejected a proposal (the data did not identify the critic well enough; the heavy
-        rover's probing had decayed to nothing after 20 legs with half its proposals
-        rejected)."""
-        self._rejected_in_leg = False
         self._t0 = 0.0
         self._prev: tuple[float, Array, Array] | None = None
         self._since_eval = 0
@@ -149,9 +143,6 @@ class QLearningController(WeightReadout):
                     and isinstance(self.critic, LeastSquaresCritic)):
                 self.widen_time_basis()
             self.policy_evaluation()
-        if self.leg_index >= 0 and not self._rejected_in_leg:
-            self.probing_decays += 1
-        self._rejected_in_leg = False
         self.leg_index += 1
         self._t0 = float(t)
         self._prev = None
@@ -188,7 +179,7 @@ class QLearningController(WeightReadout):
     def probing_std(self) -> float:
         """Current control probing standard deviation, N (decays per leg)."""
         c = self.config
-        return max(c.probing_std * c.probing_decay ** self.probing_decays, c.probing_floor)
+        return max(c.probing_std * c.probing_decay ** max(self.leg_index, 0), c.probing_floor)
 
     # ---------------------------------------------------------------- step
     def step(self, t: float, x_bar: Array, d_applied: Array | None = None,
@@ -252,7 +243,7 @@ class QLearningController(WeightReadout):
         else:
             self._keep_off.release()
         if self.robust:
-            d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.probing_decays
+            d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.leg_index
             self._noise_d = self._probing_d.sample(d_std)
             self._d_out = self._policy_d(phi, x) + self._noise_d
         self._prev = (tau, x, u)  # the applied force: the rows stay right when u saturates
@@ -456,7 +447,6 @@ class QLearningController(WeightReadout):
         self._note(event, 'leg diverged: ' + reason)
 
     def _note(self, event: PolicyEvent, reason: str) -> None:
-        self._rejected_in_leg |= event is PolicyEvent.REJECTED
         self._events.append((event, reason))
         self.event_counts[event] += 1
 

@@ -120,23 +120,6 @@ def test_a_status_quo_that_stopped_reaching_its_targets_no_longer_blocks_learnin
     assert ctrl._events[-1][0] is PolicyEvent.ADOPTED
 
 
-def test_the_probing_does_not_decay_over_a_leg_whose_proposal_was_rejected():
-    """Seen on the 120 kg rover: half of the proposals rejected, and the probing decayed
-    per leg all the same, to 0.8 N after 20 legs, so the data never came to identify the
-    critic. A leg in which the guard rejected a proposal keeps the probing where it was."""
-    ctrl = QLearningController(ControllerConfig(probing_std=20.0, probing_decay=0.5), 4, 2, 0,
-                               np.random.default_rng(0))
-    x = np.array([-3.0, 1.0, 0.0, 0.0])
-    ctrl.start_leg(x, 0.0)
-    ctrl.start_leg(x, T)
-    assert ctrl.probing_std == 10.0                        # a leg with nothing rejected
-    ctrl._note(PolicyEvent.REJECTED, 'test: the critic does not identify enough')
-    ctrl.start_leg(x, 2 * T)
-    assert ctrl.probing_std == 10.0                        # kept
-    ctrl.start_leg(x, 3 * T)
-    assert ctrl.probing_std == 5.0
-
-
 def test_a_diverging_leg_reverts_to_the_last_policy_that_completed_a_leg():
     """A destabilising gain (positive feedback) adopted after good learning: the leg's D
     runs away, the controller reverts to the policy that last completed a leg, and that
