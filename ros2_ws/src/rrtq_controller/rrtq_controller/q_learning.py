@@ -235,8 +235,7 @@ class QLearningController(WeightReadout):
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
             u = np.clip(self._policy_u(phi, x) + noise, -limit, limit)
-        if (nearest is not None and x.size >= 2 + self.m and self.config.keep_off > 0.0
-                and nearest[0] < self._keep_off.reach(x[2:2 + self.m], nearest[1])):
+        if nearest is not None and x.size >= 2 + self.m:   # it acts within its reach only
             u = np.clip(self._keep_off(u, x[2:2 + self.m], nearest[0], nearest[1],
                                        lambda: self._force_scale(self.critic.window.samples()[4])),
                         -limit, limit)
