@@ -41,7 +41,8 @@ def seed_row(seed_dir: pathlib.Path) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('runs', nargs='+', type=pathlib.Path)
-    ap.add_argument('--label', nargs='*', default=[])
+    ap.add_argument('--label', nargs='+', action='extend', default=[],
+                    help='labels of the runs in order (repeat the flag or list them)')
     args = ap.parse_args(argv)
     print('| configuration | seed | outcome | last-ten leg cost / optimum | max abs(u) N | reverts '
           '| holds |')
