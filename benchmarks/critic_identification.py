@@ -30,7 +30,6 @@ import argparse
 import sys
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from common import save
 from rrtq_controller.config import ControllerConfig
@@ -60,16 +59,6 @@ def _held_riccati(ctrl: QLearningController, A: np.ndarray, B: np.ndarray) -> np
     return -C.reshape(len(C), 2, 4).transpose(0, 2, 1).reshape(-1, 2)
 
 
-def _true_greedy(ctrl: QLearningController, A: np.ndarray, B: np.ndarray):
-    """τ -> R⁻¹BᵀP^π(τ) of the actor's policy on the true plant."""
-    def rhs(tau: float, p: np.ndarray) -> np.ndarray:
-        P, K = p.reshape(4, 4), ctrl.gain(tau)
-        Acl = A - B @ K
-        return (Acl.T @ P + P @ Acl + M + K.T @ R @ K).ravel()
-    sol = solve_ivp(rhs, (0.0, T), P_T.ravel(), dense_output=True, rtol=1e-8, atol=1e-10)
-    return lambda tau: np.linalg.solve(R, B.T @ sol.sol(tau).reshape(4, 4))
-
-
 def identify(mass: float, stiffness: float, damping: float, limit: float, probing: float,
              seed: int) -> dict:
     """Drive the held policy with fixed probing, fit the critic once, compare its greedy gain."""
@@ -78,20 +67,10 @@ def identify(mass: float, stiffness: float, damping: float, limit: float, probin
                            probing_decay=1.0, actor_warmup_legs=10 ** 6, widen_powers=())
     ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(seed))
     ctrl.set_weights(actor=_held_riccati(ctrl, A, B))
-    plant = ref.Plant(A, B, DT, np.zeros((4, 1)))
-    t, v = 0.0, np.zeros(2)
-    for disp in ref.random_legs(np.random.default_rng(seed + 5), LEGS, 1.5, 4.5):
-        x = np.concatenate([-disp, v])
-        ctrl.start_leg(x, t)
-        d0 = float(np.linalg.norm(x))
-        for _ in range(int(round(T / DT))):
-            if np.linalg.norm(x) <= cfg.rho * d0:
-                break
-            x = plant.step(x, np.clip(ctrl.step(t, x), -limit, limit), np.zeros(1))
-            t += DT
-        v = x[2:]
+    ref.run_legs(ctrl, A, B, M, R, P_T, T, DT,
+                 ref.random_legs(np.random.default_rng(seed + 5), LEGS, 1.5, 4.5), cfg.rho)
     ctrl.policy_evaluation()
-    greedy = _true_greedy(ctrl, A, B)
+    greedy = ref.improved_gain(A, B, M, R, P_T, T, ctrl.gain)
     errors = [np.linalg.norm(ctrl.critic_gain(tau) - greedy(tau)) / np.linalg.norm(greedy(tau))
               for tau in TAUS]
     return {'greedy_error': float(np.mean(errors)), 'residual': float(ctrl.critic.residual)}

@@ -61,6 +61,25 @@ def riccati(A: Array, B: Array, M: Array, R: Array, P_T: Array, T: float,
     return P
 
 
+def improved_gain(A: Array, B: Array, M: Array, R: Array, P_T: Array, T: float,
+                  gain: Callable[[float], Array]) -> Callable[[float], Array]:
+    """τ -> R⁻¹BᵀP^K(τ): the greedy (Kleinman) improvement of the policy u = -K(τ)x̄.
+
+    P^K is the policy's value kernel, from the Lyapunov equation
+    dP/dτ = M + KᵀRK + P(A - BK) + (A - BK)ᵀP, P(0) = P_T; the greedy gain of the policy's
+    own Q-function is what a critic that evaluates the policy proposes.
+    """
+    n = A.shape[0]
+
+    def rhs(tau: float, p: Array) -> Array:
+        P, K = p.reshape(n, n), gain(tau)
+        Acl = A - B @ K
+        return (M + K.T @ R @ K + P @ Acl + Acl.T @ P).ravel()
+
+    sol = solve_ivp(rhs, (0.0, T), P_T.ravel(), rtol=1e-10, atol=1e-10, dense_output=True)
+    return lambda tau: np.linalg.solve(R, B.T @ sol.sol(tau).reshape(n, n))
+
+
 def game_gamma_bound(A: Array, B: Array, M: Array, R: Array, P_T: Array, T: float, F: Array,
                      lo: float = 0.1, hi: float = 100.0, iters: int = 22) -> float:
     """Smallest γ for which the game Riccati equation has a solution on [0, T] (bisection)."""
