@@ -107,3 +107,34 @@ def test_live_polygons_rebuild_only_when_the_items_change():
     assert live.update((b,)).nearest([10.5, 10.5]) == (pytest.approx(-0.5), 0)
     assert live.update((Item(ELL + 10),)) is not live.update((b,))   # identity, not value
     assert len(live.update(())) == 0
+
+
+def test_cast_finds_the_first_boundary_along_the_ray_as_shapely_does():
+    rng = np.random.default_rng(4)
+    polys = random_scene(rng)
+    pset = PolygonSet(polys)
+    union = shapely.union_all([shapely.Polygon(p).exterior for p in polys])
+    hits = 0
+    for origin in rng.uniform(-22, 22, (200, 2)):
+        angle = rng.uniform(0.0, 2.0 * math.pi)
+        d = np.array([math.cos(angle), math.sin(angle)])
+        length = float(rng.uniform(1.0, 15.0))
+        t, index, normal = pset.cast(origin, d, length)
+        meet = shapely.LineString([origin, origin + length * d]).intersection(union)
+        if meet.is_empty:
+            assert (t, index, normal) == (math.inf, -1, (0.0, 0.0))
+            continue
+        hits += 1
+        want = shapely.Point(origin).distance(meet)      # the nearest crossing along the ray
+        assert t == pytest.approx(want, abs=1e-9)
+        point = origin + t * d
+        assert shapely.Polygon(polys[index]).exterior.distance(shapely.Point(point)) < 1e-9
+        n = np.array(normal)
+        assert n @ n == pytest.approx(1.0) and n @ d <= 0.0   # faces the way the ray came
+    assert hits > 50
+    # Head-on at a face of the L: its normal is the face's outward normal, -x.
+    t, index, normal = PolygonSet([ELL + [5.0, 0.0]]).cast([0.0, 0.5], [2.0, 0.0], 10.0)
+    assert (t, index) == (pytest.approx(5.0), 0) and normal == pytest.approx((-1.0, 0.0))
+    assert PolygonSet([ELL]).cast([5.0, 0.5], [1.0, 0.0], 10.0)[1] == -1   # pointing away
+    assert PolygonSet([ELL]).cast([5.0, 0.5], [-1.0, 0.0], 1.0)[1] == -1   # beyond its length
+    assert PolygonSet([]).cast([0, 0], [1, 0], 5.0)[1] == -1

@@ -241,8 +241,9 @@ class ControllerConfig:
                                     'its force while the speed falls slower than to stop '
                                     'within this time')
     keep_off: float = setting(0.3, unit='m', low=0.0, doc='guard: within this distance of '
-                              'the nearest detected obstacle (/safety/status), an approach '
-                              'to it is pushed back (learning variants; 0: off)')
+                              'the nearest detected obstacle or of the one ahead along the '
+                              'velocity (/safety/status), an approach to it is pushed back '
+                              '(learning variants; 0: off)')
     """:class:`guard.KeepOff`; needs the safety node's /safety/status (lock-step: of the same
     step), which the learning controller then waits for."""
     forces: tuple[tuple[float, float, float], ...] = setting(
@@ -302,7 +303,8 @@ class StepInfo:
     probing: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
     """Probing noise added to the control output, N."""
     keep_off: float = 0.0
-    """N: the push away from the nearest detected obstacle added this step (guard.KeepOff)."""
+    """N: the pushes away from the nearest detected obstacle and from the one ahead along the
+    velocity added this step (guard.KeepOff, guard.face_ahead)."""
     policy_event: str = ''
     """What the guard did this step: '' (nothing), or :class:`guard.PolicyEvent` values
     joined by ';' (an evaluation at a leg start can both reject and revert)."""

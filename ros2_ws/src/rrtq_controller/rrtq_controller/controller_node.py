@@ -1,7 +1,7 @@
 """Controller node: /odom and /plan in, /cmd_force and /controller/state out.
 
-The learning variants also read /safety/status: the nearest detected obstacle, for the
-keep-off (:class:`rrtq_controller.guard.KeepOff`).
+The learning variants also read /safety/status: the nearest detected obstacle and the one
+ahead along the velocity, for the keep-off (:class:`rrtq_controller.guard.KeepOff`).
 
 Variants: ``nominal`` and ``robust`` (model-free finite-horizon Q-learning, leg by leg
 along the plan) and ``open_loop`` (a scripted force profile): a
@@ -53,6 +53,14 @@ def _nearest(status: SafetyStatus | None) -> tuple[float, np.ndarray] | None:
         return None
     d = status.obstacle_direction
     return float(status.obstacle_distance), np.array([d.x, d.y])
+
+
+def _ahead(status: SafetyStatus | None) -> tuple[float, np.ndarray] | None:
+    """The detected obstacle ahead along the velocity of a /safety/status (None: none received)."""
+    if status is None:
+        return None
+    d = status.ahead_direction
+    return float(status.ahead_distance), np.array([d.x, d.y])
 
 
 def _requirements(config: ControllerConfig) -> list[Requirement]:
@@ -126,7 +134,7 @@ class ControllerNode(Node):
             None if dist is None else dist.value, changed_reference(step.get('reference')),
             None if augmented is None else OnChange(
                 augmented.stamp_ns, lambda: [poly for _, poly in augmented.read()]),
-            _nearest(step.get('safety')))
+            _nearest(step.get('safety')), _ahead(step.get('safety')))
         if out is None:
             self.get_logger().error(f'non-finite odometry at t={t:.2f} s: commanding zero',
                                     throttle_duration_sec=1.0)

@@ -58,7 +58,7 @@ class ControlOutput:
     prediction_std: Array = dataclasses.field(default_factory=lambda: np.zeros(0))
     gp_dictionary: int = 0
     horizon_cost: float = 0.0
-    keep_off: float = 0.0                # N: the push away from the nearest detected obstacle
+    keep_off: float = 0.0                # N: the pushes away from the nearest and ahead obstacles
 
 
 class Watch(enum.Enum):
@@ -94,6 +94,8 @@ class Driver(abc.ABC):
         self.stale = False
         self.nearest: tuple[float, Array] | None = None
         """The nearest detected obstacle at this step (see :meth:`control`)."""
+        self.ahead: tuple[float, Array] | None = None
+        """The detected obstacle ahead along the velocity at this step (see :meth:`control`)."""
 
     @property
     def warnings(self) -> list[str]:
@@ -119,11 +121,14 @@ class Driver(abc.ABC):
                 disturbance: ArrayLike | None,
                 reference: OnChange[tuple[Array, int]] | None = None,
                 obstacles: OnChange[list[Array]] | None = None,
-                nearest: tuple[float, Array] | None = None) -> ControlOutput | None:
+                nearest: tuple[float, Array] | None = None,
+                ahead: tuple[float, Array] | None = None) -> ControlOutput | None:
         """One step: adopt a plan that changed (and the guidance), then :meth:`step`.
 
         ``nearest``: the nearest detected obstacle (distance m, unit vector from it to the
-        robot) as the safety node reports it, for the learning variants' keep-off.
+        robot) as the safety node reports it, for the learning variants' keep-off, and
+        ``ahead`` the one ahead along the velocity (distance the disc travels to it, m, and
+        the unit normal there toward the robot), for their second keep-off.
         None for non-finite odometry: the node commands zero, and nothing is learned.
         A non-finite disturbance measurement is not used.
         """
@@ -135,7 +140,7 @@ class Driver(abc.ABC):
             self._plan_stamp = plan.stamp_ns
             self.set_plan(plan.read(), state, t)
         self.set_guidance(reference, obstacles)
-        self.nearest = nearest
+        self.nearest, self.ahead = nearest, ahead
         d = None
         if disturbance is not None and np.all(np.isfinite(disturbance)):
             d = np.asarray(disturbance, dtype=float)
@@ -214,7 +219,7 @@ class LearningDriver(Driver):
             c.completed_leg()
         u = c.step(t, self.legs.x_bar(x),
                    None if d_applied is None else np.asarray(d_applied, dtype=float),
-                   self.nearest)
+                   self.nearest, self.ahead)
         return self._output(u, x, event.value, t)
 
     def _moved(self, before: Array | None) -> Array | None:

@@ -29,7 +29,8 @@ from .basis import QuadraticBasis, TimeBasis
 from .bellman import Policy, bellman_rows
 from .config import ActorLaw, ControllerConfig, SafeHold, StepInfo, Variant
 from .critic import LeastSquaresCritic, fit, make_critic, residual
-from .guard import Brake, DivergenceWatch, KeepOff, PolicyEvent, held_below, trust_step
+from .guard import (Brake, DivergenceWatch, KeepOff, PolicyEvent, face_ahead, held_below,
+                    trust_step)
 from .probing import Probing
 from .readout import WeightReadout, _features
 from .stability import gain_warnings
@@ -91,6 +92,8 @@ class QLearningController(WeightReadout):
         self._held = False
         self._brake = Brake(c.force_limit, c.hold_stop_time, c.dt)
         self._keep_off = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time)
+        self._keep_ahead = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time)
+        """The keep-off of the obstacle ahead along the velocity (:func:`guard.face_ahead`)."""
         self._braking = False
         """Whether the robot is being braked (a HOLD with ``safe_hold: brake``, or a leg that
         left its line): until the robot is at rest, at most T, and then only on a policy
@@ -183,7 +186,8 @@ class QLearningController(WeightReadout):
 
     # ---------------------------------------------------------------- step
     def step(self, t: float, x_bar: Array, d_applied: Array | None = None,
-             nearest: tuple[float, Array] | None = None) -> Array:
+             nearest: tuple[float, Array] | None = None,
+             ahead: tuple[float, Array] | None = None) -> Array:
         """One control period (RRT-QX Alg. 1, lines 12-16; ACC Alg. 1, lines 8-14).
 
         Parameters
@@ -199,6 +203,10 @@ class QLearningController(WeightReadout):
             The nearest detected obstacle: its distance from the robot (m) and the unit
             vector from it to the robot, for the keep-off (:class:`guard.KeepOff`); None:
             not known.
+        ahead
+            The detected obstacle ahead along the velocity: how far the robot's disc travels
+            before it meets it (m) and the unit normal of its boundary there, toward the
+            robot, for the second keep-off (:func:`guard.face_ahead`); None: not known.
 
         Returns
         -------
@@ -235,12 +243,15 @@ class QLearningController(WeightReadout):
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
             u = np.clip(self._policy_u(phi, x) + noise, -limit, limit)
-        if nearest is not None and x.size >= 2 + self.m:   # it acts within its reach only
-            u = np.clip(self._keep_off(u, x[2:2 + self.m], nearest[0], nearest[1],
-                                       lambda: self._force_scale(self.critic.window.samples()[4])),
-                        -limit, limit)
-        else:
-            self._keep_off.release()
+        velocity = x[2:2 + self.m]
+        obstacles = (nearest, None if ahead is None else face_ahead(*ahead, velocity))
+        for keep, obstacle in zip((self._keep_off, self._keep_ahead), obstacles, strict=True):
+            if obstacle is not None and x.size >= 2 + self.m:   # it acts within its reach only
+                u = np.clip(keep(u, velocity, obstacle[0], obstacle[1],
+                                 lambda: self._force_scale(self.critic.window.samples()[4])),
+                            -limit, limit)
+            else:
+                keep.release()
         if self.robust:
             d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.leg_index
             self._noise_d = self._probing_d.sample(d_std)
@@ -248,7 +259,7 @@ class QLearningController(WeightReadout):
         self._prev = (tau, x, u)  # the applied force: the rows stay right when u saturates
         events, self._events = self._events, []
         self.info = StepInfo(tau=tau, e_c1=e_c1, e_c2=e_c2, e_a=e_a, e_d=e_d, probing=noise,
-                             keep_off=self._keep_off.push,
+                             keep_off=self._keep_off.push + self._keep_ahead.push,
                              policy_event=';'.join(e.value for e, _ in events),
                              policy_reason='; '.join(r for _, r in events))
         return u

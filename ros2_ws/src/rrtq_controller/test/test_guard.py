@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from rrtq_controller.config import ControllerConfig, SafeHold
-from rrtq_controller.guard import (Brake, DivergenceWatch, KeepOff, PolicyEvent, held_below,
-                                   trust_step)
+from rrtq_controller.guard import (Brake, DivergenceWatch, KeepOff, PolicyEvent, face_ahead,
+                                   held_below, trust_step)
 from rrtq_controller.q_learning import QLearningController
 from rrtq_testing import controller_reference as ref
 
@@ -489,6 +489,58 @@ def test_the_controller_applies_the_keep_off_and_learns_from_the_force_applied()
     assert np.array_equal(ctrl._prev[2], u)
     free = ctrl.step(DT, x, nearest=(2.0, np.array([0.0, 1.0])))
     assert ctrl.info.keep_off == 0.0 and free[1] == 0.0
+
+
+def _slide(use_ahead, mass=120.0, damping=8.0, limit=150.0):
+    """A rover sliding south at 1.2 m/s 0.25 m beside a wall's face (x = 0, the obstacle
+    east of it from y = -1 up) toward a block below (y <= -1 from x = -3 to 1), its
+    policy pushing it on at 60 N: the 120 kg rover at 60 N of probing that touched an
+    obstacle 5 mm deep. The nearest obstacle and the one ahead along the velocity are
+    computed here by hand, as the safety node reports them (robot radius 0). Returns
+    (closest gap to the block, largest abs(u), closest gap to the wall)."""
+    A, B = ref.rover(mass=mass, stiffness=0.0, damping=damping)
+    plant = ref.Plant(A, B, DT)
+    cfg = ControllerConfig(force_limit=limit, probing_std=0.0, keep_off=0.3)
+    ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(0))
+    target = np.array([-0.25, -6.0, 0.0, 0.0])   # the leg's target, behind the block
+    ctrl.start_leg(np.array([-0.25, 3.0, 0.0, -1.2]) - target, 0.0)
+    ctrl._policy_u = lambda phi, x: np.array([0.0, -60.0])
+    x = np.array([-0.25, 3.0, 0.0, -1.2])
+    block, wall, umax = math.inf, math.inf, 0.0
+    for k in range(int(6.0 / DT)):
+        gaps = {'wall': -x[0] if x[1] > -1.0 else math.hypot(x[0], x[1] + 1.0),
+                'block': x[1] + 1.0 if x[0] < 1.0 else math.hypot(x[0] - 1.0, x[1] + 1.0)}
+        near = min(gaps, key=gaps.get)
+        nearest = (gaps['wall'], np.array([-1.0, 0.0])) if near == 'wall' else (
+            gaps['block'], np.array([0.0, 1.0]))
+        ahead = None
+        if use_ahead:
+            ahead = ((x[1] + 1.0) / -x[3], np.array([0.0, 1.0])) if x[3] < 0.0 else (
+                math.inf, np.zeros(2))
+        u = ctrl.step(k * DT, x - target, nearest=nearest, ahead=ahead)
+        umax = max(umax, float(np.abs(u).max()))
+        x = plant.step(x, u)
+        block, wall = min(block, x[1] + 1.0), min(wall, -x[0])
+    return block, umax, wall
+
+
+def test_the_keep_off_stops_a_slide_along_one_obstacle_into_the_one_ahead():
+    """Acting on the nearest obstacle alone, the push is across the motion (away from the
+    wall beside it) until the block ahead becomes the nearest, too late to stop a heavy
+    rover: it touches. With the obstacle ahead along the velocity, it stops short."""
+    block, umax, wall = _slide(use_ahead=True)
+    assert block > 0.1 and umax <= 150.0 and wall > 0.0
+    assert _slide(use_ahead=False)[0] <= 0.0
+
+
+def test_face_ahead_gives_the_distance_of_the_face_met_and_the_same_time_to_contact():
+    n = np.array([0.0, 1.0])
+    v = np.array([0.6, -0.8])                  # 1 m/s, 0.8 m/s toward the face
+    d, direction = face_ahead(2.5, n, v)       # 2.5 m along the ray: 2 m from the face
+    assert d == pytest.approx(2.0) and np.array_equal(direction, n)
+    assert d / 0.8 == pytest.approx(2.5 / 1.0)
+    assert math.isinf(face_ahead(math.inf, np.zeros(2), v)[0])
+    assert math.isinf(face_ahead(1.0, n, np.zeros(2))[0])
 
 
 def test_a_completed_policy_that_leaves_its_line_twice_is_discarded():

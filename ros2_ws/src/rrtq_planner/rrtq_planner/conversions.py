@@ -137,7 +137,9 @@ def safety_status_msg(header: Header, step: SafetyStep, margin: MarginStatus) ->
         bound_violations=int(margin.bound_violations),
         leg_deviation=float(margin.leg_deviation), legs=int(margin.legs),
         obstacle_distance=float(step.obstacle_distance),
-        obstacle_direction=Vector3(x=step.obstacle_direction[0], y=step.obstacle_direction[1]))
+        obstacle_direction=Vector3(x=step.obstacle_direction[0], y=step.obstacle_direction[1]),
+        ahead_distance=float(step.ahead_distance),
+        ahead_direction=Vector3(x=step.ahead_direction[0], y=step.ahead_direction[1]))
     status.header = header
     return status
 

@@ -80,6 +80,9 @@ class SafetyConfig:
                                       'republished when the margin has changed (grown, or '
                                       'shrunk under safety.margin conformal or learned_bound) '
                                       'by at least this since the last publication')
+    look_ahead: float = setting(5.0, unit='m', low=0.0, doc='how far along the robot\'s '
+                                'velocity the first detected obstacle it would meet is looked '
+                                'for (/safety/status ahead_distance; 0: not)')
 
     def __post_init__(self) -> None:
         check(self)
@@ -123,6 +126,14 @@ class SafetyStep:
     obstacle_direction: tuple[float, float] = (0.0, 0.0)
     """Unit vector from that obstacle's nearest point to the robot (zero when none, or
     when the robot's centre is inside it)."""
+    ahead_distance: float = math.inf
+    """m the robot's disc travels along its velocity before it meets a detected obstacle
+    (inf: none within ``look_ahead``, or at rest; 0: overlapping one already): the
+    obstacle the robot heads for, which need not be the nearest (Nav2's collision monitor
+    looks along the velocity in the same way)."""
+    ahead_direction: tuple[float, float] = (0.0, 0.0)
+    """Unit normal, toward the robot, of that obstacle's boundary where the disc meets it
+    (zero when there is none)."""
 
 
 class SafetyMonitor:
@@ -146,6 +157,9 @@ class SafetyMonitor:
         self._detected_stamp: int | None = None
         self._detected_rings: list[np.ndarray] = []
         self._detected_set = PolygonSet([])
+        self._swept = PolygonSet([])
+        """The detected obstacles grown by the robot radius: the robot's centre meets one
+        where its disc meets the obstacle."""
         self._published = PolygonSet([])
         self._augmented_stamp = 0
         self._existing = LivePolygons()
@@ -215,7 +229,8 @@ class SafetyMonitor:
 
     def step(self, stamp_ns: int, position: npt.ArrayLike, detected: OnChange[Obstacles] | None,
              leg: Leg | None, policy: tuple[float, float, float] | None = None,
-             local: Callable[[str, np.ndarray], float] | None = None) -> SafetyStep:
+             local: Callable[[str, np.ndarray], float] | None = None,
+             velocity: npt.ArrayLike | None = None) -> SafetyStep:
         """One step of the safety node (RRT-QX §5).
 
         Measure D_rob on the current leg; republish the augmented set when the margin has
@@ -240,6 +255,8 @@ class SafetyMonitor:
             (learned_bound, docs/margins.md §5.1); the augmented set is republished when one
             of them has moved by the growth threshold. None: every obstacle is grown by the
             margin.
+        velocity : array_like, shape (2,), optional
+            The robot's, m/s, for the obstacle ahead (None: none is looked for).
         """
         p = np.asarray(position, dtype=float)[:2]
         changed = detected is not None and detected.stamp_ns != self._detected_stamp
@@ -248,6 +265,8 @@ class SafetyMonitor:
             self._detected = detected.read()
             self._detected_rings = [poly for _, poly in self._detected]
             self._detected_set = PolygonSet(self._detected_rings)
+            self._swept = PolygonSet([grow_polygon(poly, self.config.robot_radius)
+                                      for poly in self._detected_rings])
         grown = False
         if policy is not None:
             grown = self.follow(*policy)
@@ -271,13 +290,15 @@ class SafetyMonitor:
         self.collided = self.collided or new_collision
         near, direction = nearest_obstacle(p, self._detected_set, self._detected_rings,
                                            self.config.robot_radius)
+        ahead, normal = (math.inf, (0.0, 0.0)) if velocity is None else obstacle_ahead(
+            p, velocity, self._swept, self.config.look_ahead)
         return SafetyStep(
             augmented=augmented, augmented_stamp_ns=self._augmented_stamp, d_rob=self.d_rob,
             d_rob_max=self.d_rob_max, margin=self.margin, clearance=float(gap),
             nearest=nearest, collision=self.collided, new_collision=new_collision,
             leg_index=leg.index if leg is not None and leg.d0 > 0.0 else 0,
             local_margins=dict(self._published_local), obstacle_distance=near,
-            obstacle_direction=direction)
+            obstacle_direction=direction, ahead_distance=ahead, ahead_direction=normal)
 
 
 def clearance(position: npt.ArrayLike, polygons: PolygonSet | Sequence[np.ndarray],
@@ -290,6 +311,26 @@ def clearance(position: npt.ArrayLike, polygons: PolygonSet | Sequence[np.ndarra
     shapes = polygons if isinstance(polygons, PolygonSet) else PolygonSet(polygons)
     value, index = shapes.nearest(np.asarray(position, dtype=float)[:2])
     return value - robot_radius, index
+
+
+def obstacle_ahead(position: npt.ArrayLike, velocity: npt.ArrayLike, swept: PolygonSet,
+                   look_ahead: float) -> tuple[float, tuple[float, float]]:
+    """How far (m) the robot's disc moves along ``velocity`` before it meets an obstacle.
+
+    ``swept`` holds the obstacles grown by the robot radius, so the disc meets one where its
+    centre, moving along the ray, crosses a grown boundary. Returns that distance and the
+    boundary's unit normal toward the robot; (inf, (0, 0)) at rest or with nothing within
+    ``look_ahead``; (0, (0, 0)) when the centre is inside a grown obstacle already (the
+    disc overlaps it: the nearest obstacle is what answers that).
+    """
+    p = np.asarray(position, dtype=float)[:2]
+    v = np.asarray(velocity, dtype=float)[:2]
+    if look_ahead <= 0.0 or len(swept) == 0 or not float(np.hypot(*v)) > 1e-9:
+        return math.inf, (0.0, 0.0)
+    if swept.nearest(p)[0] <= 0.0:
+        return 0.0, (0.0, 0.0)
+    distance, _, normal = swept.cast(p, v, look_ahead)
+    return distance, normal
 
 
 def nearest_obstacle(position: npt.ArrayLike, polygons: PolygonSet,

@@ -96,7 +96,7 @@ class SafetyNode(Node):
                 self.estimate_pub.publish(disturbance_estimate_msg(step.stamp_ns, est))
         done = self.monitor.step(step.stamp_ns, x[:2], conv.changed_obstacles(detected),
                                  leg_of(state), (margin.d_rob, margin.d_rob_max, margin.margin),
-                                 margin.local)
+                                 margin.local, velocity=x[2:4])
         if done.augmented is not None:
             self.aug_pub.publish(conv.obstacle_array_msg(step.stamp_ns, done.augmented,
                                                          done.margin, done.local_margins))

@@ -123,3 +123,48 @@ def test_nearest_detected_obstacle_distance_and_direction_match_shapely():
         foot = np.asarray(p) - (exact * np.asarray(n))       # back along n: on the obstacle
         assert min(shapely.Polygon(q).exterior.distance(shapely.Point(foot)) for q in polys) < 1e-9
     assert nearest_obstacle([0.0, 0.0], PolygonSet([]), [], 0.2) == (math.inf, (0.0, 0.0))
+
+
+def test_the_obstacle_ahead_along_the_velocity_is_the_one_the_disc_would_meet():
+    """The case the nearest obstacle misses: a robot sliding south along one obstacle's west
+    face toward a second one below. The nearest is the face beside it; the one ahead is
+    the second, at the distance the disc (radius 0.2) travels before it touches it, as
+    shapely's swept disc finds by bisection."""
+    from rrtq_common.lockstep import OnChange
+    beside = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 6.0], [0.0, 6.0]])
+    below = np.array([[-3.0, -3.0], [1.0, -3.0], [1.0, -1.0], [-3.0, -1.0]])
+    monitor = SafetyMonitor(SafetyConfig(robot_radius=0.2))
+    robot, velocity = np.array([-0.5, 3.0]), np.array([0.0, -1.2])
+    step = monitor.step(0, robot, OnChange(1, lambda: [('beside', beside), ('below', below)]),
+                        None, velocity=velocity)
+    assert step.obstacle_distance == pytest.approx(0.3) and step.obstacle_direction == (-1.0, 0.0)
+    assert step.ahead_distance == pytest.approx(3.8, abs=0.01)     # 3 m to y = -1, less 0.2
+    assert step.ahead_direction == pytest.approx((0.0, 1.0))        # the lower one's top face
+    # Against shapely: the disc at the reported distance touches, slightly short of it not.
+    shapes = [shapely.Polygon(beside), shapely.Polygon(below)]
+
+    def touches(p, d, s):
+        return any(shapely.Point(p + s * d).buffer(0.2, 256).intersects(q) for q in shapes)
+    rng = np.random.default_rng(6)
+    hits = 0
+    for _ in range(100):
+        p, v = rng.uniform(-4.0, 4.0, 2), rng.normal(size=2)
+        if any(q.distance(shapely.Point(p)) <= 0.2 for q in shapes):
+            continue
+        s = SafetyMonitor(SafetyConfig(robot_radius=0.2, look_ahead=20.0)).step(
+            0, p, OnChange(1, lambda: [('beside', beside), ('below', below)]), None,
+            velocity=v).ahead_distance
+        d = v / np.linalg.norm(v)
+        if math.isinf(s):
+            assert not any(touches(p, d, k) for k in np.linspace(0.0, 20.0, 401))
+            continue
+        hits += 1
+        assert touches(p, d, s + 0.01) and not touches(p, d, s * 0.995 - 1e-3)
+    assert hits > 20
+    # At rest, or with the look-ahead off: nothing ahead.
+    still = SafetyMonitor(SafetyConfig(robot_radius=0.2)).step(
+        0, [-0.5, 3.0], OnChange(1, lambda: [('below', below)]), None, velocity=[0.0, 0.0])
+    assert math.isinf(still.ahead_distance) and still.ahead_direction == (0.0, 0.0)
+    off = SafetyMonitor(SafetyConfig(robot_radius=0.2, look_ahead=0.0)).step(
+        0, [-0.5, 3.0], OnChange(1, lambda: [('below', below)]), None, velocity=[0.0, -1.0])
+    assert math.isinf(off.ahead_distance)
