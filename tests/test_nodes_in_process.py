@@ -1,6 +1,7 @@
 """The simulator-side nodes on an in-process executor, driven by the test."""
 
 import numpy as np
+import pytest
 from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
@@ -245,11 +246,13 @@ def test_controller_commands_zero_when_odometry_goes_stale(ros):
     assert all((m.wrench.force.x, m.wrench.force.y) == (0.0, 0.0) for m in cmds.messages[1:])
 
 
-def test_controller_keeps_off_the_obstacle_the_safety_status_reports(ros):
+@pytest.mark.parametrize('reported', ['nearest', 'ahead'])
+def test_controller_keeps_off_the_obstacle_the_safety_status_reports(ros, reported):
     """The wiring of the keep-off: the robot moves toward its waypoint (3, 0) at 0.5 m/s,
     the policy pushes it on; a /safety/status with a detected obstacle 0.1 m ahead (its
-    direction to the robot -x) turns the command back, and ControllerState.keep_off says
-    by how much."""
+    direction to the robot -x), reported as the nearest or, with the nearest 10 m off to
+    the side, as the one ahead along the velocity, turns the command back, and
+    ControllerState.keep_off says by how much."""
     from geometry_msgs.msg import Vector3
     from rrtq_msgs.msg import SafetyStatus
     context, executor, _ = ros
@@ -264,8 +267,10 @@ def test_controller_keeps_off_the_obstacle_the_safety_status_reports(ros):
     odom_pub.publish(conv.odometry_msg(0, moving))
     wait_for_messages(executor, cmds, 1)
     assert cmds.messages[0].wrench.force.x > 1.0                 # toward x = 3
-    safety_pub.publish(SafetyStatus(obstacle_distance=0.1,
-                                    obstacle_direction=Vector3(x=-1.0, y=0.0)))
+    facing, aside = (0.1, Vector3(x=-1.0, y=0.0)), (10.0, Vector3(x=0.0, y=1.0))
+    near, ahead = (facing, (float('inf'), Vector3())) if reported == 'nearest' else (aside, facing)
+    safety_pub.publish(SafetyStatus(obstacle_distance=near[0], obstacle_direction=near[1],
+                                    ahead_distance=ahead[0], ahead_direction=ahead[1]))
     assert spin_until(executor, lambda: 'safety' in node.gate.latest, 10.0)
     odom_pub.publish(conv.odometry_msg(50_000_000, moving))
     wait_for_messages(executor, cmds, 2)

@@ -155,3 +155,25 @@ def test_the_gain_rebuilt_from_the_state_is_the_controllers():
     for tau in (10.0, 6.3, 0.7, 0.0, -1.0):
         np.testing.assert_allclose(gain(tau), ctrl.gain(tau), rtol=1e-12, atol=1e-12)
     assert actor_gain([], basis.rates, basis.powers, basis.horizon, 4, 2) is None
+
+
+def test_the_status_reports_the_obstacle_ahead_along_the_velocity(node_of):
+    """Below the box, heading up at it: /safety/status carries the distance the robot's
+    disc (radius 0.5 m) travels before it meets the box's bottom face (y = 8) and that
+    face's normal toward the robot; heading away, none. The nearest obstacle is the same
+    box here, so both are reported on one geometry."""
+    node = node_of()
+    statuses = []
+    node.status_pub.publish = statuses.append
+    detected = conv.obstacle_array_msg(0, [('box', np.array(BOX))], 0.0)
+    for k, vy in enumerate((1.0, -1.0, 0.0)):
+        odom = odom_at(k * DT_NS, 12.0, 4.0)
+        odom.twist.twist.linear.y = vy
+        node.step(Step(k * DT_NS, {'odom': odom, 'detected': detected, 'perception': None,
+                                   'state': None}))
+        serialize_message(statuses[-1])
+    toward, away, still = statuses
+    assert toward.ahead_distance == pytest.approx(8.0 - 0.5 - 4.0)
+    assert (toward.ahead_direction.x, toward.ahead_direction.y) == pytest.approx((0.0, -1.0))
+    assert toward.obstacle_distance == pytest.approx(8.0 - 4.0 - 0.5)
+    assert away.ahead_distance == float('inf') and still.ahead_distance == float('inf')
