@@ -9,7 +9,7 @@ ROOT = HERE.parent
 BENCHMARKS = [[sys.executable, name] for name in (
     'lockstep_speed.py', 'recorder_throughput.py', 'controller_bench.py', 'controller_zero_gain.py',
     'planner_vs_ompl.py', 'vf_lpc_step.py', 'vf_lpc_mismatch.py', 'vf_lpc_guidance.py',
-    'margin_step.py', 'margins_offline.py', 'controller_robustness.py',
+    'margin_step.py', 'safety_step.py', 'margins_offline.py', 'controller_robustness.py',
     'critic_identification.py')]
 # Monte Carlo of the closed loop (rrtq bench): 50 seeds of random layouts on the paper
 # scenario, on every core; about 25 minutes on 2 cores.

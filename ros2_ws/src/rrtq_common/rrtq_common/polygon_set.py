@@ -127,22 +127,26 @@ class PolygonSet:
         candidates = np.flatnonzero(self.box_distances(point) <= radius)
         return candidates[self.signed_distances(point, candidates) <= radius]
 
-
     def cast(self, origin: npt.ArrayLike, direction: npt.ArrayLike,
              length: float) -> tuple[float, int, tuple[float, float]]:
         """The first boundary the ray from ``origin`` along ``direction`` meets within ``length``.
 
         Returns the distance (m) along the unit ``direction`` to it, the polygon's index and
         the unit normal of the edge hit, on the side the ray came from; (inf, -1, (0, 0)) when
-        no edge lies on the ray within ``length``. Every edge is tested at once (a ray
-        crosses boxes a point query would prune).
+        no edge lies on the ray within ``length``. Only the polygons whose bounding boxes
+        meet the box of the ray's segment are tested, their edges all at once.
         """
         p = np.asarray(origin, dtype=float).reshape(2)
         d = np.asarray(direction, dtype=float).reshape(2)
         if self._count == 0 or not float(d @ d) > 0.0:
             return math.inf, -1, (0.0, 0.0)
         d = d / math.hypot(d[0], d[1])
-        ab, ap = self._ab, self._a - p
+        e: npt.NDArray[np.intp] | slice = slice(None)
+        if self._count > self.SMALL and math.isfinite(length):
+            q = p + length * d
+            boxes = np.all((self._lo <= np.maximum(p, q)) & (self._hi >= np.minimum(p, q)), axis=1)
+            e = np.flatnonzero(boxes[self._owner])
+        ab, ap, owner, len2 = self._ab[e], self._a[e] - p, self._owner[e], self._len2[e]
         denom = d[0] * ab[:, 1] - d[1] * ab[:, 0]
         with np.errstate(divide='ignore', invalid='ignore'):
             t = (ap[:, 0] * ab[:, 1] - ap[:, 1] * ab[:, 0]) / denom
@@ -150,11 +154,11 @@ class PolygonSet:
         hit = (denom != 0.0) & (s >= 0.0) & (s <= 1.0) & (t >= 0.0) & (t <= length)
         if not np.any(hit):
             return math.inf, -1, (0.0, 0.0)
-        e = int(np.flatnonzero(hit)[np.argmin(t[hit])])
-        normal = np.array([-ab[e, 1], ab[e, 0]]) / math.sqrt(self._len2[e])
+        i = int(np.flatnonzero(hit)[np.argmin(t[hit])])
+        normal = np.array([-ab[i, 1], ab[i, 0]]) / math.sqrt(len2[i])
         if float(normal @ d) > 0.0:
             normal = -normal
-        return float(t[e]), int(self._owner[e]), (float(normal[0]), float(normal[1]))
+        return float(t[i]), int(owner[i]), (float(normal[0]), float(normal[1]))
 
 
 class LivePolygons:
