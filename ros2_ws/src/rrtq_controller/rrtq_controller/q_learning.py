@@ -114,7 +114,8 @@ class QLearningController(WeightReadout):
         """Whether the time basis was widened by ``widen_powers`` (see :meth:`widen_time_basis`)."""
         self._d_out = np.zeros(self.q)
         tc = self.config.probing_correlation
-        self._probing_u = Probing(m, self.config.dt, tc, self.config.probing_across, rng)
+        self._probing_u = Probing(m, self.config.dt, tc, self.config.probing_across, rng,
+                                  self.config.probing_line_fraction)
         self._probing_d = Probing(self.q, self.config.dt, tc, 1.0, rng)
         self._noise_d = np.zeros(self.q)
         self.info = StepInfo()
@@ -164,6 +165,7 @@ class QLearningController(WeightReadout):
         self._t0 = float(t)
         self._prev = None
         self._watch.start(np.asarray(x0_bar, dtype=float))
+        self._probing_u.follow_line(np.asarray(x0_bar, dtype=float))
         self._held = False
 
     def completed_leg(self) -> None:
@@ -232,7 +234,7 @@ class QLearningController(WeightReadout):
             e_a = self.actor_update(phi, x, self._target[0])
             if self.robust:
                 e_d = self.disturbance_actor_update(phi, x, self._target[1])
-        noise = self._probing_u.sample(self.probing_std)
+        noise = self._probing_u.sample(self.probing_std, x[:2])
         limit = self.config.force_limit
         if self._braking and (t >= self._brake_until or self._brake.at_rest and (
                 self._completed is not None or self._t0 > self._brake_started)):

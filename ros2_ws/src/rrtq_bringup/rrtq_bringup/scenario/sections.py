@@ -37,7 +37,7 @@ _SAFETY_KEYS = ('margin', 'confidence', 'window', 'initial_margin', 'calibration
 _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
-    'force_limit', 'model', 'vf_lpc',
+    'probing_line_fraction', 'force_limit', 'model', 'vf_lpc',
 )  # fmt: skip
 # planner key -> the settings dataclass it belongs to
 _PLANNER_KEYS: dict[str, type] = {
@@ -211,6 +211,8 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
     numbers = {name: r.setting(data, name, ControllerConfig, key)
                for name in ('alpha_c', 'alpha_a', 'alpha_d', 'rho', 'probing_std',
                             'probing_decay')}
+    numbers['probing_line_fraction'] = r.setting(data, 'probing_line_fraction', ControllerConfig,
+                                                 key, allow_inf=True)
     # the actuator's limit is the user's specification; by default the plant's
     limit = (plant.force_limit if data.get('force_limit') is None
              else r.setting(data, 'force_limit', ControllerConfig, key, allow_inf=True))
