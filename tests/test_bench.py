@@ -52,6 +52,7 @@ def test_two_seeds_table_matches_the_runs(tmp_path, base):
                  '--runs', runs, '--out', out)
     assert proc.returncode == 0, proc.stderr
     assert '2/2' in proc.stderr                                     # the progress bar
+    assert "the base scenario's obstacles (1) are replaced" in proc.stderr   # not silently
     table = json.loads((out / 'monte_carlo.json').read_text())
     summaries = {seed: json.loads((runs / f'seed-{seed:03d}' / 'summary.json').read_text())
                  for seed in (5, 6)}

@@ -246,6 +246,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f'rrtq bench: {len(seeds)} seeds of {base.name} ({args.obstacles} obstacles each)'
           + (f' x {len(confs)} configurations' if sweep else '')
           + f', engine {engine_text} -> {runs}', file=sys.stderr)
+    if base.obstacles and not args.keep_obstacles:
+        print(f'rrtq bench: the base scenario\'s obstacles ({len(base.obstacles)}) are replaced '
+              'by each seed\'s layout (--keep-obstacles keeps them)', file=sys.stderr)
     started = time.monotonic()
     rows = sorted(scheduler.run(), key=lambda r: (r['config'], r['seed']))
     table = {
