@@ -11,6 +11,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import sys
+import threading
 from collections.abc import Callable, Sequence
 from typing import Any, TypeVar
 
@@ -101,6 +104,16 @@ def declare_config(node: Node, cls: type[T], dims: Dimensions | None = None,
     return built
 
 
+TEARDOWN_S = 10.0
+"""s a node process may take to tear down once its spin has ended (see :func:`spin_node`)."""
+
+
+def _exit_stuck() -> None:
+    print(f'teardown took more than {TEARDOWN_S:g} s (the middleware): exiting', file=sys.stderr,
+          flush=True)
+    os._exit(0)
+
+
 def spin_node(factory: Callable[[], Node], args: list[str] | None = None) -> None:
     """The standard ``main()`` of a node process: init, spin, clean shutdown.
 
@@ -108,6 +121,13 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None) -> Non
     SIGINT and SIGTERM end the spin through rclpy's signal handlers; the node is
     destroyed in every case so that it can finish its outputs (the recorder closes
     its file in ``destroy_node``).
+
+    The teardown is bounded: past :data:`TEARDOWN_S` the process exits anyway. Fast DDS can
+    spin for as long as a discovery callback is in flight when a participant is deleted
+    (eProsima/Fast-DDS#6513). Seen: a spawner whose orchestrator had been killed stayed
+    at 100 % of a core in ``DomainParticipant::set_listener`` under ``rcl_node_fini``
+    for minutes, an orphan. A node finishes its own outputs first in ``destroy_node``
+    (the recorder its file), before the middleware's part.
     """
     rclpy.init(args=args)
     node = None
@@ -122,7 +142,11 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None) -> Non
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
+        watchdog = threading.Timer(TEARDOWN_S, _exit_stuck)
+        watchdog.daemon = True
+        watchdog.start()
         executor.shutdown()
         if node is not None:
             node.destroy_node()
         rclpy.try_shutdown()
+        watchdog.cancel()
