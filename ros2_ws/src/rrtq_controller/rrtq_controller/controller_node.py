@@ -47,20 +47,19 @@ def _keeps_off(config: ControllerConfig) -> bool:
     return config.variant in (Variant.NOMINAL, Variant.ROBUST) and config.keep_off > 0.0
 
 
-def _nearest(status: SafetyStatus | None) -> tuple[float, np.ndarray] | None:
-    """The nearest detected obstacle of a /safety/status (None: none received)."""
-    if status is None:
-        return None
-    d = status.obstacle_direction
-    return float(status.obstacle_distance), np.array([d.x, d.y])
+Obstacle = tuple[float, np.ndarray] | None
 
 
-def _ahead(status: SafetyStatus | None) -> tuple[float, np.ndarray] | None:
-    """The detected obstacle ahead along the velocity of a /safety/status (None: none received)."""
+def _obstacles(status: SafetyStatus | None) -> tuple[Obstacle, Obstacle]:
+    """The nearest detected obstacle of a /safety/status and the one ahead along the velocity.
+
+    Each is (distance m, unit vector); (None, None) when no status was received.
+    """
     if status is None:
-        return None
-    d = status.ahead_direction
-    return float(status.ahead_distance), np.array([d.x, d.y])
+        return None, None
+    near, ahead = status.obstacle_direction, status.ahead_direction
+    return ((float(status.obstacle_distance), np.array([near.x, near.y])),
+            (float(status.ahead_distance), np.array([ahead.x, ahead.y])))
 
 
 def _requirements(config: ControllerConfig) -> list[Requirement]:
@@ -134,7 +133,7 @@ class ControllerNode(Node):
             None if dist is None else dist.value, changed_reference(step.get('reference')),
             None if augmented is None else OnChange(
                 augmented.stamp_ns, lambda: [poly for _, poly in augmented.read()]),
-            _nearest(step.get('safety')), _ahead(step.get('safety')))
+            *_obstacles(step.get('safety')))
         if out is None:
             self.get_logger().error(f'non-finite odometry at t={t:.2f} s: commanding zero',
                                     throttle_duration_sec=1.0)

@@ -51,11 +51,10 @@ class Probing:
         is a direction of the inputs too.
         """
         self.follow_line(x0)
-        length = float(np.linalg.norm(x0[:2]))
-        if self._state.size != 2 or length < 1e-9:
+        if self._normal is None:
             self._axes = np.eye(self._state.size)
             return
-        e = x0[:2] / length
+        e = x0[:2] / self._length
         self._axes = np.array([[e[0], -e[1]], [e[1], e[0]]]) @ np.diag([1.0, self._across])
 
     def follow_line(self, x0: Array) -> None:
