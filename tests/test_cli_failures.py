@@ -1,5 +1,6 @@
 """Bad input exits 2 before anything starts; crashes and kills end runs cleanly."""
 
+import contextlib
 import json
 import os
 import pathlib
@@ -11,6 +12,8 @@ import pytest
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from mcap.records import Message
+
+from rrtq_bringup.orchestrator import DOMAIN_LOCK_DIR
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 RRTQ = str(ROOT / 'scripts/rrtq')
@@ -155,8 +158,22 @@ def test_crashed_node_fails_the_run_naming_it(tmp_path):
     assert reader.get_summary().statistics.channel_message_counts   # finished and readable
 
 
+def open_files(pid):
+    found = set()
+    for fd in pathlib.Path(f'/proc/{pid}/fd').iterdir():
+        with contextlib.suppress(OSError):
+            found.add(os.readlink(fd))
+    return found
+
+
 def test_sigkill_of_orchestrator_leaves_no_orphans_and_a_finished_recording(tmp_path):
     proc, out, kids = start_paced_run(tmp_path)
+    # Every node holds the run's domain lock: the domain is not free while one of them
+    # tears down (a later run would see it).
+    domain = dict(line.split('=', 1) for line in pathlib.Path(f'/proc/{kids[0]}/environ')
+                  .read_bytes().decode().split('\0') if '=' in line)['ROS_DOMAIN_ID']
+    lock = str(DOMAIN_LOCK_DIR / f'{domain}.lock')
+    assert all(lock in open_files(pid) for pid in kids), [cmdline(p) for p in kids]
     proc.kill()
     proc.wait()
     assert wait_gone(kids) == [], [cmdline(p) for p in kids]

@@ -27,7 +27,7 @@ from rrtq_bringup.recording import RecorderConfig
 from rrtq_bringup.scenario import Scenario, worst_case_game
 from rrtq_bringup.viz import LiveConfig, VizConfig
 from rrtq_common import topics
-from rrtq_common.run import Dimensions, RunConfig
+from rrtq_common.run import READY_PARAMETER, Dimensions, RunConfig
 from rrtq_common.settings import to_parameters
 from rrtq_common.world_yaml import WorldSource
 from rrtq_controller.config import Variant
@@ -51,6 +51,7 @@ class NodeSpec:
     cls: str                  # node class name (composed mode)
     params: dict[str, Any]
     subscribes: tuple[str, ...] = ()   # per-step topics it reads (start-up gate)
+    publishes: tuple[str, ...] = ()    # per-step topics it writes (start-up handshake)
 
 
 def closed_loop(scenario: Scenario) -> bool:
@@ -85,14 +86,17 @@ def build_graph(scenario: Scenario, speed: float, output: str,
          **(to_parameters(scenario.lpc, exclude=('force_limit',)) if vf_lpc else {})},
         subscribes=clock + (topics.ODOM,) + ((topics.PLANNER_STATS,) if loop else ())
         + ((topics.DISTURBANCE,) if robust else ())
-        + ((topics.GUIDANCE_REFERENCE,) if vf_lpc else ()))
+        + ((topics.GUIDANCE_REFERENCE,) if vf_lpc else ()),
+        publishes=(topics.CMD_FORCE, topics.CONTROLLER_STATE))
     disturbance = NodeSpec(
         'disturbance_injector', 'rrtq_sim.disturbance_node', 'DisturbanceNode',
         {**sim_time, **dims, **only(run, 'seed'), **to_parameters(dist),
          **(to_parameters(worst_case_game(scenario)) if worst_case else {})},
-        subscribes=clock + (topics.ODOM,) + ((topics.CONTROLLER_STATE,) if worst_case else ()))
+        subscribes=clock + (topics.ODOM,) + ((topics.CONTROLLER_STATE,) if worst_case else ()),
+        publishes=(topics.DISTURBANCE,))
     spawner = NodeSpec('obstacle_spawner', 'rrtq_sim.spawner_node', 'SpawnerNode',
-                       {**sim_time, **world}, subscribes=clock + (topics.ODOM,))
+                       {**sim_time, **world}, subscribes=clock + (topics.ODOM,),
+                       publishes=(topics.PERCEPTION_STATUS,))
     published = (STEP_TOPICS if loop else STEP_TOPICS[:6]) + (
         (topics.GUIDANCE_REFERENCE,) if gvf else ())
     recorder = NodeSpec('recorder', 'rrtq_bringup.recorder_node', 'RecorderNode',
@@ -116,22 +120,34 @@ def build_graph(scenario: Scenario, speed: float, output: str,
             'planner', 'rrtq_planner.planner_node', 'PlannerNode',
             {**sim_time, **run, **to_parameters(scenario.planner),
              **(to_parameters(scenario.guidance, exclude=('dt',)) if gvf else {})},
-            subscribes=clock + (topics.ODOM, topics.SAFETY_STATUS)))
+            subscribes=clock + (topics.ODOM, topics.SAFETY_STATUS),
+            publishes=(topics.PLANNER_STATS,) + ((topics.GUIDANCE_REFERENCE,) if gvf else ())))
         others.append(NodeSpec(
             'safety', 'rrtq_planner.safety_node', 'SafetyNode',
             {**sim_time, **world, **dims, **only(run, 'dt', 'lockstep'),
              **to_parameters(scenario.safety, exclude=('robot_radius',)),
              **to_parameters(scenario.margins)},
             subscribes=clock + (topics.ODOM, topics.PERCEPTION_STATUS,
-                                topics.CONTROLLER_STATE)))
+                                topics.CONTROLLER_STATE),
+            publishes=(topics.SAFETY_STATUS,)))
     # The first step waits until every reader of the per-step topics is connected,
-    # so that no node (and not the recorder) misses step 0.
-    wait_for = tuple(f'{topic}:{sum(topic in s.subscribes for s in others) + (topic in SIMULATOR_READS)}'
-                     for topic in published)
+    # so that no node (and not the recorder) misses step 0: the simulator counts the
+    # readers its own writers have matched, every other writer's node announces when its
+    # writers have matched theirs (rrtq_common.readiness, rclpy-side).
+    readers = {topic: sum(topic in s.subscribes for s in others) + (topic in SIMULATOR_READS)
+               for topic in published}
+    wait_for = tuple(f'{topic}:{count}' for topic, count in readers.items())
+    announcing = []
+    for i, spec in enumerate(others):
+        expected = [f'{topic}:{readers[topic]}' for topic in spec.publishes if topic in readers]
+        if expected:
+            others[i] = dataclasses.replace(
+                spec, params={**spec.params, READY_PARAMETER: expected})
+            announcing.append(spec.name)
     simulator = SimulatorConfig(start=(float(scenario.start[0]), float(scenario.start[1])),
                                 speed=speed, duration=scenario.duration,
                                 acks=('cmd_force', 'controller_state', 'disturbance'),
-                                wait_for=wait_for)
+                                wait_for=wait_for, ready_from=tuple(announcing))
     simulator_spec = NodeSpec(
         'simulator', 'rrtq_sim.simulator_node', 'SimulatorNode',
         {**only(dims, 'n'), **only(run, 'dt'),

@@ -63,6 +63,19 @@ class BadInput(Exception):
     """A problem with the user's input: reported with exit code 2, nothing started."""
 
 
+_LOCK_FDS: dict[int, int] = {}
+
+
+def lock_fd(domain: int) -> int:
+    """The open lock file of a domain held by :func:`domain_id` in this process.
+
+    A run's node processes inherit it, so that the domain stays held until the last of
+    them has gone, not only the orchestrator: the nodes of a killed orchestrator take a
+    moment to tear down, and a run that took their domain meanwhile would see them.
+    """
+    return _LOCK_FDS[domain]
+
+
 @contextlib.contextmanager
 def domain_id() -> Iterator[int]:
     """Hold an unused ROS_DOMAIN_ID (1-101) for the run; the lock dies with the process."""
@@ -76,9 +89,11 @@ def domain_id() -> Iterator[int]:
         except OSError:
             handle.close()
             continue
+        _LOCK_FDS[candidate] = handle.fileno()
         try:
             yield candidate
         finally:
+            del _LOCK_FDS[candidate]
             handle.close()
         return
     raise RuntimeError('no free ROS_DOMAIN_ID in 1..101')
@@ -220,7 +235,7 @@ class Run:
                str(params_file)]
         return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent,
-                                start_new_session=True)
+                                start_new_session=True, pass_fds=(lock_fd(self.domain),))
 
     def _composed_failure(self, exc: Exception) -> None:
         """A callback raised in composed mode: the run fails naming the node's module."""
@@ -266,6 +281,7 @@ class Run:
         from rclpy.signals import SignalHandlerOptions
         from rrtq_bringup.supervisor import SupervisorNode
         from rrtq_common.executors import make_executor
+        from rrtq_common.readiness import announce_when_matched
 
         os.environ.update(ros_env(domain))
         context = rclpy.Context()
@@ -280,6 +296,7 @@ class Run:
                 cls = getattr(importlib.import_module(spec.module), spec.cls)
                 overrides = [Parameter(k, value=v) for k, v in spec.params.items()]
                 nodes.append(cls(context=context, parameter_overrides=overrides))
+                announce_when_matched(nodes[-1])
             for node in nodes:
                 executor.add_node(node)
             self._spin(executor, lambda: None, nodes[0])

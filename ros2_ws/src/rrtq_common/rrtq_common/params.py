@@ -24,6 +24,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from rrtq_common.executors import make_executor
+from rrtq_common.readiness import announce_when_matched
 from rrtq_common.run import Dimensions
 from rrtq_common.settings import Kind, from_parameters, kind_of, parameter_value, spec
 
@@ -134,6 +135,7 @@ def spin_node(factory: Callable[[], Node], args: list[str] | None = None) -> Non
     executor = make_executor()
     try:
         node = factory()
+        announce_when_matched(node)
         executor.add_node(node)
         # Not executor.spin(): Jazzy's EventsExecutor.spin() keeps a core busy and never
         # lets the signal handlers run (rrtq_common.executors).

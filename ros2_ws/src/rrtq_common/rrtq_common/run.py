@@ -6,10 +6,12 @@ from dataclasses import dataclass
 
 from rrtq_common.settings import setting
 
-__all__ = ['STEP_S', 'RunConfig', 'Dimensions']
+__all__ = ['READY_PARAMETER', 'STEP_S', 'RunConfig', 'Dimensions']
 
 STEP_S = 0.05
 """The default step Δt of a run, s: the controller's period, the plant's step, the stamps."""
+READY_PARAMETER = 'ready_when_matched'
+"""The start-up handshake's parameter of a node (rrtq_common.readiness): ``topic:count``."""
 
 
 @dataclass(frozen=True)

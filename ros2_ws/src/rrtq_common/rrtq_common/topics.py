@@ -17,6 +17,8 @@ PERCEPTION_STATUS = '/perception/status'
 OBSTACLES_TRUTH = '/obstacles/truth'
 SIMULATOR_PAUSE = '/simulator/pause'
 GUIDANCE_REFERENCE = '/guidance/reference'
+# The start-up handshake (rrtq_common.readiness): each writer of per-step topics, once connected.
+GRAPH_READY = '/graph/ready'
 # Written for people only, by the visualisation node (rrtq_bringup.viz_node): no node reads them.
 TF = '/tf'
 VIZ_TRUTH = '/viz/obstacles/truth'

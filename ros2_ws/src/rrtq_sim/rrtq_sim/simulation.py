@@ -33,6 +33,9 @@ class SimulatorConfig:
                                     'perception_status')
     wait_for: tuple[str, ...] = setting((), doc='topic:count pairs; the first step waits '
                                         'until each topic has that many subscribers')
+    ready_from: tuple[str, ...] = setting((), doc='nodes whose writers must announce on '
+                                          '/graph/ready that they reached their readers '
+                                          'before the first step (rrtq_common.readiness)')
     settle_s: float = setting(0.5, unit='s', low=0.0, doc='wall time to wait once the graph '
                               'is connected, so that discovery between the other nodes '
                               'completes too')

@@ -16,10 +16,10 @@ from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from rrtq_msgs.msg import ControllerState, Disturbance, PerceptionStatus
-from std_msgs.msg import Empty
+from std_msgs.msg import Empty, String
 
 from rrtq_common import conversions as conv
-from rrtq_common import qos, topics
+from rrtq_common import qos, readiness, topics
 from rrtq_common.executors import NODE_OPTIONS
 from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate
@@ -63,6 +63,9 @@ class SimulatorNode(Node):
             Input(key, ACK_TOPICS[key][1], ACK_TOPICS[key][0], qos.STREAM)
             for key in sorted(set(self.config.acks) | set(INPUTS))])
         self.create_subscription(Empty, topics.SIMULATOR_PAUSE, self._pause, qos.LATCHED)
+        self.ready: set[str] = set()
+        self.create_subscription(String, topics.GRAPH_READY,
+                                 lambda msg: self.ready.add(msg.data), readiness.QOS)
         self._ready_since: float | None = None
         self._start_timer = self.create_timer(0.02, self._try_start)
 
@@ -98,6 +101,10 @@ class SimulatorNode(Node):
 
     # -- stepping -------------------------------------------------------------
     def _graph_ready(self) -> bool:
+        if waiting := sorted(set(self.config.ready_from) - self.ready):
+            self.get_logger().info(f'waiting for the writers of {", ".join(waiting)} to reach '
+                                   'their readers', throttle_duration_sec=5.0)
+            return False
         for item in self.config.wait_for:
             topic, _, count = item.rpartition(':')
             # Own publishers: readers actually matched to them (the graph's counts can run
