@@ -168,3 +168,31 @@ def test_the_obstacle_ahead_along_the_velocity_is_the_one_the_disc_would_meet():
     off = SafetyMonitor(SafetyConfig(robot_radius=0.2, look_ahead=0.0)).step(
         0, [-0.5, 3.0], OnChange(1, lambda: [('below', below)]), None, velocity=[0.0, -1.0])
     assert math.isinf(off.ahead_distance)
+
+
+def test_a_growing_map_grows_only_its_new_obstacles_and_publishes_what_growing_afresh_gives():
+    """The monitor reuses an obstacle grown at the last publication when its id, radius and
+    vertices are the same (GrownCache); each published ring is the one grown afresh."""
+    from rrtq_common.lockstep import OnChange
+    from rrtq_planner.safety import grow_polygon
+    rng = np.random.default_rng(5)
+    boxes = [(f'b{i}', SQUARE + rng.uniform(-30, 30, 2)) for i in range(12)]
+    monitor = SafetyMonitor(SafetyConfig(robot_radius=0.4))
+    far = np.array([100.0, 100.0])                       # no obstacle near enough to clip
+    published = []
+    for k, count in enumerate((4, 4, 7, 12)):           # the map grows; once it does not
+        out = monitor.step(k, far, OnChange(k + 1, lambda n=count: boxes[:n]), None)
+        published.append(out.augmented)
+        for (oid, ring), (bid, box) in zip(out.augmented, boxes[:count], strict=True):
+            assert oid == bid and np.array_equal(ring, grow_polygon(box, 0.4))
+    # swept and augmented, 12 obstacles each: grown once, however often the set changed
+    assert monitor.grown == 24
+    moved = [(oid, box + [0.5, 0.0]) if oid == 'b3' else (oid, box) for oid, box in boxes]
+    out = monitor.step(9, far, OnChange(20, lambda: moved), None)
+    assert monitor.grown == 26                          # b3 moved: grown again, twice
+    assert np.array_equal(dict(out.augmented)['b3'], grow_polygon(moved[3][1], 0.4))
+    monitor.update([0, 0], [10, 0], [1, 1.0])           # the margin grows: every one afresh
+    out = monitor.step(10, far, OnChange(21, lambda: moved), None)
+    assert monitor.grown == 38                          # (the robot radius's: reused)
+    assert all(np.array_equal(ring, grow_polygon(box, 1.4))
+               for (_, ring), (_, box) in zip(out.augmented, moved, strict=True))
