@@ -44,13 +44,13 @@ WARN_AFTER_S = 5.0
 """s of wall time after which a node still waiting says for which readers."""
 
 
-def expectations(items: Sequence[str]) -> dict[str, int]:
-    """``['/cmd_force:3', ...]`` -> ``{'/cmd_force': 3, ...}``."""
+def expectations(items: Sequence[str], name: str = PARAMETER) -> dict[str, int]:
+    """``['/cmd_force:3', ...]`` -> ``{'/cmd_force': 3, ...}`` (``name``: the parameter's)."""
     found = {}
     for item in items:
         topic, sep, count = item.rpartition(':')
         if not sep or not topic or not count.isdigit():
-            raise ValueError(f'{PARAMETER}: {item!r} is not topic:count')
+            raise ValueError(f'{name}: {item!r} is not topic:count')
         found[topic] = int(count)
     return found
 

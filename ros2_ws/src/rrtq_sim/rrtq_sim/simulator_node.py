@@ -63,6 +63,7 @@ class SimulatorNode(Node):
             Input(key, ACK_TOPICS[key][1], ACK_TOPICS[key][0], qos.STREAM)
             for key in sorted(set(self.config.acks) | set(INPUTS))])
         self.create_subscription(Empty, topics.SIMULATOR_PAUSE, self._pause, qos.LATCHED)
+        self._wait_for = readiness.expectations(self.config.wait_for, 'wait_for')
         self.ready: set[str] = set()
         self.create_subscription(String, topics.GRAPH_READY,
                                  lambda msg: self.ready.add(msg.data), readiness.QOS)
@@ -105,13 +106,12 @@ class SimulatorNode(Node):
             self.get_logger().info(f'waiting for the writers of {", ".join(waiting)} to reach '
                                    'their readers', throttle_duration_sec=5.0)
             return False
-        for item in self.config.wait_for:
-            topic, _, count = item.rpartition(':')
+        for topic, count in self._wait_for.items():
             # Own publishers: readers actually matched to them (the graph's counts can run
             # ahead of endpoint matching). Other topics: what discovery reports.
             own = {topics.ODOM: self.odom_pub, topics.CLOCK: self.clock_pub}.get(topic)
             seen = own.get_subscription_count() if own else self.count_subscribers(topic)
-            if seen < int(count):
+            if seen < count:
                 return False
         return all(self.count_publishers(ACK_TOPICS[key][0]) >= 1 for key in self.config.acks)
 
