@@ -1,5 +1,6 @@
 """The start-up handshake (rrtq_common.readiness): no first step before every writer's readers."""
 
+import dataclasses
 import pathlib
 
 import pytest
@@ -96,3 +97,17 @@ def test_the_graph_gives_each_writer_its_readers_and_the_simulator_their_names(t
             assert count == len(readers) and 'recorder' in readers, (name, topic)
     # Each per-step topic: the simulator's own by matched counts, the others announced.
     assert set(written) | {topics.CLOCK, topics.ODOM} == set(STEP_TOPICS)
+
+
+def test_the_nominal_controller_reads_the_disturbance_unless_told_not_to(tmp_path):
+    """Its critic learns from /disturbance: it subscribes, and the injector waits for it too."""
+    scenario = load_scenario(str(ROOT / 'scenarios' / 'rrtqx_paper.yaml'))
+    blind = dataclasses.replace(scenario, controller=dataclasses.replace(
+        scenario.controller, measured_disturbance=False))
+    counts = {}
+    for name, s in (('reads', scenario), ('blind', blind)):
+        specs = {spec.name: spec for spec in build_graph(s, 0.0, str(tmp_path / f'{name}.mcap'))}
+        counts[name] = readiness.expectations(
+            specs['disturbance_injector'].params[readiness.PARAMETER])[topics.DISTURBANCE]
+        assert (topics.DISTURBANCE in specs['controller'].subscribes) == (name == 'reads')
+    assert counts['reads'] == counts['blind'] + 1

@@ -9,7 +9,7 @@ node declares its parameters from the same dataclasses.
 Lock-step chain of one step k (each arrow: "waits for, stamped t_k"):
 spawner (odom) -> safety (perception status, controller state of k-1) -> planner
 (safety status) -> controller (planner stats; the safety status, for the keep-off;
-disturbance of k-1 when robust) ->
+disturbance of k-1 when it learns from it) ->
 disturbance injector (controller state, worst case only) -> simulator (command,
 controller state, disturbance) -> step k+1. Outputs published only on change
 (detected map, augmented set, plan) are named by the stamp in the status that
@@ -67,7 +67,6 @@ def build_graph(scenario: Scenario, speed: float, output: str,
     """
     plant, dist, ctrl = scenario.plant, scenario.disturbance, scenario.controller
     loop = closed_loop(scenario)
-    robust = ctrl.variant is Variant.ROBUST
     vf_lpc = ctrl.variant is Variant.VF_LPC
     gvf = loop and scenario.guidance.mode is GuidanceMode.GVF
     worst_case = dist.model is DisturbanceModel.WORST_CASE
@@ -85,7 +84,7 @@ def build_graph(scenario: Scenario, speed: float, output: str,
         {**sim_time, **dims, **only(run, 'lockstep', 'seed'), **to_parameters(ctrl),
          **(to_parameters(scenario.lpc, exclude=('force_limit',)) if vf_lpc else {})},
         subscribes=clock + (topics.ODOM,) + ((topics.PLANNER_STATS,) if loop else ())
-        + ((topics.DISTURBANCE,) if robust else ())
+        + ((topics.DISTURBANCE,) if ctrl.reads_disturbance else ())
         + ((topics.GUIDANCE_REFERENCE,) if vf_lpc else ()),
         publishes=(topics.CMD_FORCE, topics.CONTROLLER_STATE))
     disturbance = NodeSpec(

@@ -164,6 +164,7 @@ ERRORS = [
     ({'controller': {'variant': 'open_loop', 'forces': [[1, 0, 0], [1, 2, 2]]}}, 'controller.forces[1]', 'increasing'),
     ({'controller': {'variant': 'open_loop', 'forces': [[1, 0]]}}, 'controller.forces[0]', '[t, fx, fy]'),
     ({'controller': {'variant': 'open_loop', 'forces': []}}, 'controller.forces', 'non-empty'),
+    ({'controller': {'measured_disturbance': 'yes'}}, 'controller.measured_disturbance', 'true or false'),
     ({'controller': {'alpha_c': 0.0}}, 'controller.alpha_c', '> 0'),
     ({'controller': {'alpha_a': -1.0}}, 'controller.alpha_a', '> 0'),
     ({'controller': {'dt': 2.0, 'horizon': 1.0}}, 'controller.dt', 'horizon'),

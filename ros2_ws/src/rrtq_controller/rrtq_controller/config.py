@@ -168,6 +168,9 @@ class ControllerConfig:
                                          'probing noise (Ornstein-Uhlenbeck); 0: white noise')
     """Slow probing moves the robot (excites velocities) where white noise at 1/Δt averages
     out in the plant; the off-policy critic needs no whiteness."""
+    measured_disturbance: bool = setting(True, doc='nominal variant: the critic takes the '
+                                         'measured disturbance (/disturbance) into its rows '
+                                         'as an input it does not choose; false: ignored')
     disturbance_probing_std: float = setting(0.1, low=0.0, doc='standard deviation of the '
                                              'disturbance-actor probing noise on the first '
                                              'leg (robust)')
@@ -278,6 +281,16 @@ class ControllerConfig:
             raise ValueError('time_powers and widen_powers must be integers >= 1')
         if self.variant is Variant.ROBUST and self.gamma is None:
             raise ValueError('gamma is required for the robust variant')
+
+    @property
+    def reads_disturbance(self) -> bool:
+        """Whether the controller learns from the measured disturbance (/disturbance).
+
+        The robust variant always (the game's rows); the nominal one unless
+        ``measured_disturbance`` is false.
+        """
+        return self.variant is Variant.ROBUST or (self.variant is Variant.NOMINAL
+                                                  and self.measured_disturbance)
 
     @property
     def gains(self) -> Gains:

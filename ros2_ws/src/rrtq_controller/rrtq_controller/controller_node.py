@@ -11,8 +11,9 @@ along the plan) and ``open_loop`` (a scripted force profile): a
 In lock-step mode a step is processed only when its inputs are complete: the planner's
 statistics of the same step, and the plan they name when it changed, and the safety
 status of the same step (learning variants; the keep-off); the disturbance that acted
-over the previous step (robust variant, which learns the game from the measured
-disturbance); the guidance reference of the same step and the augmented obstacle set it
+over the previous step (the robust variant learns the game from the measured
+disturbance, the nominal one takes it into its critic's rows unless
+``measured_disturbance`` is false); the guidance reference of the same step and the augmented obstacle set it
 names (vf_lpc, which tracks the reference and puts its barrier on those obstacles). Paced
 mode uses whatever arrived last.
 """
@@ -63,12 +64,12 @@ def _obstacles(status: SafetyStatus | None) -> tuple[Obstacle, Obstacle]:
 
 
 def _requirements(config: ControllerConfig) -> list[Requirement]:
-    """What a lock-step step waits for: the planner's word on it, the last disturbance."""
+    """What a lock-step step waits for: the planner's word on it, the last disturbance (when read)."""
     needs = []
     if config.variant is not Variant.OPEN_LOOP:
         needs.append(Requirement('stats', followup='plan',
                                  names=lambda m: conv.stamp_ns(m.plan_stamp)))
-    if config.variant is Variant.ROBUST:
+    if config.reads_disturbance:
         needs.append(Requirement('disturbance', lag=1))
     if _keeps_off(config):
         needs.append(Requirement('safety'))

@@ -68,8 +68,8 @@ def fit(rows: RowBuilder, window: SampleWindow, prior: Array, ridge: float) -> t
     """Least squares over the window's rows for the policy that ``rows`` forms them for.
 
     ``θ = argmin Σ (σθ + k)² / (1 + σᵀσ) + ε ‖θ - θ_prior‖²`` (rows normalised as in the
-    gradient law; the ridge ε, relative to the mean diagonal of the normal matrix, keeps
-    directions the data do not excite where they were).
+    gradient law; the ridge ε, relative to the mean non-zero diagonal of the normal
+    matrix, keeps directions the data do not excite where they were).
 
     Returns
     -------
@@ -80,7 +80,9 @@ def fit(rows: RowBuilder, window: SampleWindow, prior: Array, ridge: float) -> t
         return prior.copy(), 0.0
     S, y, w = _system(rows, window)
     G = S.T @ (w[:, None] * S)
-    eps = ridge * (np.trace(G) / prior.size + 1e-12)
+    # the mean over the directions the rows reach: the disturbance's weights of a run
+    # without one (d = 0 throughout) neither move nor change the others' fit
+    eps = ridge * (np.trace(G) / max(np.count_nonzero(np.diag(G)), 1) + 1e-12)
     theta = np.linalg.solve(G + eps * np.eye(prior.size), S.T @ (w * y) + eps * prior)
     return theta, _relative_residual(S, y, w, theta)
 

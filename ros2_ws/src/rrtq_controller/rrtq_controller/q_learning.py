@@ -50,7 +50,8 @@ class QLearningController(WeightReadout):
     config
         Controller parameters; scalar matrices are expanded to n x n / m x m.
     n, m, q
-        State, control and disturbance dimensions (q is ignored in the nominal variant).
+        State, control and disturbance dimensions (the nominal variant takes the q
+        measured components into its critic's rows when ``measured_disturbance``).
     rng
         Source of the probing noise.
     """
@@ -62,11 +63,13 @@ class QLearningController(WeightReadout):
         self.gains = self.config.gains
         self.gamma = self.config.gamma if self.robust and self.config.gamma is not None else 0.0
         """Attenuation level γ of the game (0 in the nominal variant: d is empty there)."""
-        self.n, self.m, self.q = n, m, (q if self.robust else 0)
+        self.exogenous = not self.robust and self.config.measured_disturbance and q > 0
+        """Nominal variant: the measured disturbance enters the critic's rows (d̂ = 0)."""
+        self.n, self.m, self.q = n, m, (q if self.robust or self.exogenous else 0)
         self.time_basis = TimeBasis(self.config.time_rates, self.config.time_powers, self.config.horizon)
         self.basis = QuadraticBasis(n, m, self.q)
         L, b = self.time_basis.size, self.basis
-        self._fixed_w = b.fixed_weights(self.config.R, self.gamma if self.robust else None)
+        self._fixed_w = b.fixed_weights(self.config.R, self.gamma)
         self._free_xu = np.searchsorted(b.free, b.xu)
         self._free_xd = np.searchsorted(b.free, b.xd)
         self.critic = make_critic(np.zeros(L * b.free.size), self.config, n, m, self.q)
@@ -222,7 +225,7 @@ class QLearningController(WeightReadout):
         tau = self.time_to_go(t)
         e_c1 = e_c2 = 0.0
         if self._prev is not None:
-            measured = d_applied is not None and self.robust
+            measured = d_applied is not None and self.q > 0
             d_prev = np.asarray(d_applied, dtype=float) if measured else self._d_out
             e_c1, e_c2 = self.critic_update(tau, x, d_prev)
         reason = self._watch.check(x)

@@ -54,7 +54,7 @@ class WeightReadout:
         n = self.n
         K = self.gain(tau, self._Wa if Wa is None else Wa)
         rows = [np.eye(n), -K]
-        if self.robust:
+        if self.q:
             rows.append(self.disturbance_gain(tau, self._Wd if Wd is None else Wd))
         G = np.vstack(rows)
         P = G.T @ Q @ G
@@ -162,7 +162,7 @@ class WeightReadout:
         full[:, self.basis.free] = phi @ theta.reshape(phi.shape[1], -1)
         full[:, self.basis.fixed] = self._fixed_w
         z = (phi[:, :, None] * x0[:, None, :]).reshape(len(x0), -1)
-        U = np.hstack([x0, z @ Wa] + ([z @ Wd] if self.robust else []))
+        U = np.hstack([x0, z @ Wa] + ([z @ Wd] if self.q else []))
         value = np.einsum('ij,ij->i', full, U[:, self.basis.rows] * U[:, self.basis.cols])
         total = float(np.sum(np.abs(value)))
         return float(np.sum(np.maximum(-value, 0.0))) / total if total > 0 else 1.0

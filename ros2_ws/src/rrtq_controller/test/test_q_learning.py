@@ -122,6 +122,30 @@ def test_robust_disturbance_actor_and_worst_case_cost():
     assert costs['robust'] < costs['nominal']
 
 
+def test_nominal_critic_learns_through_a_measured_disturbance():
+    """A sinusoid through F that the critic sees as an input it does not choose (d̂ = 0).
+
+    From the defaults (zero initial gain) on the rover without a spring: with the measured
+    disturbance in its rows the greedy gain is the Riccati gain R⁻¹BᵀP(τ) of the
+    undisturbed problem (what the nominal variant optimises); without it the sinusoid is
+    read as the plant's answer to the control, and the gain stays far from it.
+    """
+    A, B = ref.rover(stiffness=0.0)
+    R, F = 0.02 * np.eye(2), ref.MAXWELL_SLIP_F
+    legs = ref.random_legs(np.random.default_rng(1003), 16, 2.0, 8.0)
+
+    def sinusoid(tau, x):
+        return np.array([0.3 * np.sin(2 * np.pi * 0.3 * (T - tau))])
+    error = {}
+    for measured in (True, False):
+        cfg = ControllerConfig(M=10.0, R=0.02, P_T=0.5, measured_disturbance=measured)
+        ctrl = QLearningController(cfg, 4, 2, 1, np.random.default_rng(3))
+        recs = ref.run_legs(ctrl, A, B, M, R, P_T, T, DT, legs, cfg.rho, F=F, disturbance=sinusoid)
+        error[measured] = np.median([r.gain_error for r in recs[-4:]])
+    assert error[True] < 0.15
+    assert error[False] > 0.5
+
+
 def test_gain_warnings():
     cfg = dataclasses.replace(NOSPRING, alpha_a=1e6, alpha_c=200.0, critic_law=CriticLaw.GRADIENT)
     ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(0))
