@@ -149,6 +149,7 @@ class QLearningController(WeightReadout):
             if (self._full_legs >= c.widen_after_legs and c.widen_powers and not self.widened
                     and isinstance(self.critic, LeastSquaresCritic)):
                 self.widen_time_basis()
+            self._held = False   # the leg that reverted is over: its data may propose
             self.policy_evaluation()
         self.leg_index += 1
         self._t0 = float(t)

@@ -158,6 +158,24 @@ def test_the_policy_that_diverged_is_not_the_one_reverted_to():
     assert np.allclose(ctrl.gain(T), 0.0)
 
 
+def test_the_leg_after_a_hold_starts_with_a_proposal():
+    """Nothing is adopted for the rest of a leg that reverted, but the next leg's start
+    evaluates the critic and considers its proposal as any leg start does. Before, the
+    hold's flag was cleared only after that evaluation: the leg after a hold ran the
+    policy held to until the next periodic evaluation, and a gust that tripped the line
+    watch within it on every leg (a 1 m/s² sinusoid on the rover without a spring, from
+    the zero gain) held to the zero gain for 300 s."""
+    ctrl, _ = _learned(3)
+    x = np.array([-4.0, 1.0, 0.0, 0.0])
+    ctrl.start_leg(x, ctrl._t0 + T, completed=False)
+    ctrl.revert('test', brake=True)
+    before = ctrl.event_counts[PolicyEvent.ADOPTED] + ctrl.event_counts[PolicyEvent.REJECTED]
+    ctrl.policy_evaluation()                  # within the held leg: no proposal
+    assert ctrl.event_counts[PolicyEvent.ADOPTED] + ctrl.event_counts[PolicyEvent.REJECTED] == before
+    ctrl.start_leg(x, ctrl._t0 + T, completed=False)
+    assert ctrl.event_counts[PolicyEvent.ADOPTED] + ctrl.event_counts[PolicyEvent.REJECTED] == before + 1
+
+
 def test_divergence_watch_keeps_its_reference_across_restarted_legs():
     """A robot running away while new plans restart its legs (each from farther away) is
     still caught: legs that did not begin afresh keep the reference start."""
