@@ -146,7 +146,7 @@ def test_learned_bound_runs_in_the_node_and_starts_from_its_initial_margin(node_
 def test_the_gain_rebuilt_from_the_state_is_the_controllers():
     from rrtq_controller.config import ControllerConfig
     from rrtq_controller.q_learning import QLearningController
-    from rrtq_planner.conversions import actor_gain
+    from rrtq_common.actor import actor_gain
     ctrl = QLearningController(ControllerConfig(time_powers=(1, 2)), 4, 2, 0,
                                np.random.default_rng(0))
     ctrl._Wa = np.random.default_rng(1).normal(size=ctrl._Wa.shape)

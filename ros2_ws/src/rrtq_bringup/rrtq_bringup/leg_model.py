@@ -15,6 +15,7 @@ from numpy.typing import NDArray
 from scipy.linalg import expm
 
 from rrtq_bringup.scenario import Scenario
+from rrtq_common.actor import actor_gain
 from rrtq_controller.basis import TimeBasis
 from rrtq_controller.config import ControllerConfig
 from rrtq_sim.riccati import solve_riccati
@@ -98,13 +99,11 @@ def gain_from_actor(weights: Array, tau: float, n: int, m: int, basis: TimeBasis
 
     ``basis`` is the last recorded one; weights of the exponentials alone (before the
     controller widened its basis, :meth:`QLearningController.widen_time_basis`) are read
-    on those.
+    on those (:func:`rrtq_common.actor.actor_gain` reads them).
     """
     w = np.asarray(weights, dtype=float)
+    powers = basis.powers
     if w.size != basis.size * n * m and w.size == len(basis.rates) * n * m:
-        basis = TimeBasis(basis.rates)  # recorded before the controller widened its basis
-    L = basis.size
-    if w.size != L * n * m:
-        return None
-    phi = basis(tau)
-    return -np.einsum('l,lij->ji', phi, w.reshape(L, n, m))
+        powers = ()  # recorded before the controller widened its basis
+    gain = actor_gain(w, basis.rates, powers, basis.horizon, n, m)
+    return None if gain is None else gain(tau)

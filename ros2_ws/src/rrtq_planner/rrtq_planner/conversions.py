@@ -3,16 +3,15 @@
 from __future__ import annotations
 
 import struct
-from collections.abc import Callable, Sequence
 
 import numpy as np
-import numpy.typing as npt
 from geometry_msgs.msg import Point, Vector3
 from rrtq_msgs.msg import (ControllerState, DisturbanceEstimate, GuidanceReference, PlannerStats,
                            SafetyStatus)
 from std_msgs.msg import ColorRGBA, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
+from rrtq_common.actor import actor_gain
 from rrtq_common.conversions import MAP_FRAME, time_msg
 
 from .margins.learned import FieldEstimate
@@ -158,28 +157,6 @@ def disturbance_estimate_msg(stamp_ns: int, est: FieldEstimate) -> DisturbanceEs
     msg.header.stamp = time_msg(stamp_ns)
     msg.header.frame_id = MAP_FRAME
     return msg
-
-
-def actor_gain(weights: npt.ArrayLike, rates: Sequence[float], powers: Sequence[float],
-               horizon: float, n: int, m: int) -> Callable[[float], np.ndarray] | None:
-    """K̂(τ) (m x n) of the actor's weights Ŵa ((L n) x m, flat), u = −K̂(τ)x̄ + probing.
-
-    The time basis is the controller's as /controller/state reports it: exp(−λ τ) for each
-    rate, then (τ / T)^k for each power, τ clipped at 0. None when the weights do not fit it
-    (no actor: open loop, or before the first state).
-    """
-    w = np.asarray(weights, dtype=float)
-    lam, k = np.asarray(rates, dtype=float), np.asarray(powers, dtype=float)
-    size = lam.size + k.size
-    if size == 0 or w.size != size * n * m or horizon <= 0.0:
-        return None
-    table = w.reshape(size, n, m)
-
-    def gain(tau: float) -> np.ndarray:
-        t = max(tau, 0.0)
-        phi = np.concatenate([np.exp(-lam * t), (t / horizon) ** k])
-        return np.asarray(-np.einsum('l,lij->ji', phi, table))
-    return gain
 
 
 def margin_sample(t: float, x: np.ndarray, state: ControllerState | None, n: int, m: int,
