@@ -40,7 +40,9 @@ def main(argv: list[str] | None = None) -> int:
         s = summary(table)
         print(format_table(table))
         print(f"\nlegs {s['legs']}; median ratio over the last 10: {s['median_ratio_last10']}"
-              f" (complete legs: {s['median_ratio_last10_complete']}); {s['anchor']}")
+              f" (complete legs: {s['median_ratio_last10_complete']}); against the Riccati"
+              f" policy through the recorded disturbance: {s['median_ratio_riccati_policy_last10']};"
+              f" {s['anchor']}")
     return 0
 
 

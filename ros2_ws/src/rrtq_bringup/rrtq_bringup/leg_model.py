@@ -88,6 +88,11 @@ class LegModel:
         z = np.append(x_bar, 1.0) if self.affine else x_bar
         return 0.5 * float(z @ self.riccati.P(tau) @ z)
 
+    def policy(self, x_bar: Array, tau: float) -> Array:
+        """The optimal force at x̄ with time-to-go τ, −R⁻¹BᵀP(τ)z (the affine form's too)."""
+        z = np.append(x_bar, 1.0) if self.affine else x_bar
+        return -self.riccati.gain(tau) @ z
+
     def gain(self, tau: float) -> Array:
         """R⁻¹BᵀP_xx(τ), the linear part of the optimal feedback (m x n)."""
         P = self.riccati.P(tau)[:self.n, :self.n]

@@ -39,6 +39,12 @@ block R⁻¹BᵀP_xx, which is the Riccati gain R⁻¹BᵀP (the affine term doe
 
 The disturbance, when present, enters the running cost through the state it moves; the
 optimum is the nominal LQR problem's (the robust game's −γ²‖d‖² term is not included).
+Under a disturbance no policy reaches that optimum, so each leg is also flown, on the true
+plant, by the true Riccati policy from the same x̄0 through the leg's recorded d_k and the
+plant's saturation, over the recorded leg's steps, plus the cost-to-go from where it is
+then (``riccati_policy_cost``; ``ratio_riccati_policy`` = cost over it, 1 for the optimal
+feedback with or without a disturbance): the reference the random-plant bench holds the
+learner to.
 
 Gain error: with the actor weights Ŵa ((L n) x m) published every step and the time
 basis φ(τ) recorded beside them (:class:`rrtq_controller.basis.TimeBasis`), the learned
@@ -126,6 +132,10 @@ class LegRow:
     ended_by: LegEnd
     model_residual: float
     """max_k ‖x̄_k+1 − (plant prediction)‖ / max(‖x̄_k‖, 1e-3 m) over the leg."""
+    riccati_policy_cost: float = math.nan
+    """The same leg flown by the true Riccati policy through the leg's recorded disturbance
+    and the plant's saturation over the recorded leg's steps, plus the cost-to-go from
+    there (see the module doc)."""
 
     @property
     def cost(self) -> float:
@@ -136,6 +146,15 @@ class LegRow:
     def ratio(self) -> float:
         """Leg cost over the optimum (>= 1; nan when the optimum is 0)."""
         return self.cost / self.optimum if self.optimum > 0 else math.nan
+
+    @property
+    def ratio_riccati_policy(self) -> float:
+        """Leg cost over :attr:`riccati_policy_cost`: 1 for the optimal feedback, also under a disturbance.
+
+        nan when that cost is 0 or unknown.
+        """
+        c = self.riccati_policy_cost
+        return self.cost / c if c > 0 else math.nan
 
 
 @dataclasses.dataclass(frozen=True)
@@ -246,6 +265,25 @@ def _running_cost(mdl: LegModel, xb: Array, nxt: Array, u: Array, d: Array, time
     return running, resid
 
 
+def _riccati_policy_cost(mdl: LegModel, x0: Array, d: Array, times: Array, T: float,
+                         limit: float) -> float:
+    """Cost of the true Riccati policy from x̄0 through the recorded d_k, saturated at ``limit``.
+
+    It flies the recorded leg's steps (``times``: their stamps and the leg's end), τ
+    clipped at 0 as the controller clips it, and the optimal cost-to-go from where it is
+    then completes it, as for the recorded leg: the same interval, the same disturbance.
+    """
+    x, cost = np.asarray(x0, dtype=float).copy(), 0.0
+    for k in range(d.shape[0]):
+        tau = max(T - float(times[k] - times[0]), 0.0)
+        E, Qd = mdl.step_matrices(float(times[k + 1] - times[k]))
+        u = np.clip(mdl.policy(x, tau), -limit, limit)
+        z = np.concatenate([x, u, d[k], [1.0]])
+        cost += float(z @ Qd @ z)
+        x = (E @ z)[:mdl.n]
+    return cost + mdl.value(x, max(T - float(times[-1] - times[0]), 0.0))
+
+
 def _gain_error(mdl: LegModel, actor_w: list[Array], taus: Array, basis: TimeBasis) -> float:
     """Mean ‖K̂(τ_k) − K(τ_k)‖_F / ‖K(τ_k)‖_F over the steps (nan without usable weights)."""
     errs = []
@@ -320,8 +358,8 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = Quadrature.ZOH) -
             t_end, x_end, ended = float(st.t[e - 1]), xb[-1], LegEnd.END
             xb, e = xb[:-1], e - 1
         nxt = np.vstack([xb[1:], x_end[None]])
-        running, resid = _running_cost(mdl, xb, nxt, st.u[s:e], st.d[s:e],
-                                       np.append(st.t[s:e], t_end), rule)
+        times = np.append(st.t[s:e], t_end)
+        running, resid = _running_cost(mdl, xb, nxt, st.u[s:e], st.d[s:e], times, rule)
         duration = t_end - float(st.t[s])
         tau_end = max(T - duration, 0.0)
         x0 = xb[0] if xb.shape[0] else x_end
@@ -341,7 +379,9 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = Quadrature.ZOH) -
             running_cost=running, cost_to_go=mdl.value(x_end, tau_end),
             optimum=mdl.value(x0, T),
             gain_error=_gain_error(mdl, st.actor_w[s:e], taus, basis),
-            ended_by=ended, model_residual=resid))
+            ended_by=ended, model_residual=resid,
+            riccati_policy_cost=_riccati_policy_cost(mdl, x0, st.d[s:e], times, T,
+                                                     float(sc.plant.force_limit))))
     return LegTable(tuple(rows), T, rule, note)
 
 
@@ -370,6 +410,7 @@ def summary(table: LegTable, last: int = 10) -> dict[str, Any]:
         'median_ratio_last10_complete': med(complete, 'ratio'),
         'ratios_last10': [r.ratio for r in rows[-last:]],
         'median_gain_error_last10': med(rows, 'gain_error'),
+        'median_ratio_riccati_policy_last10': med(rows, 'ratio_riccati_policy'),
         'index': [r.index for r in table.rows],
         'start_time': [r.start_time for r in table.rows],
         'duration': [r.duration for r in table.rows],
@@ -381,6 +422,7 @@ def summary(table: LegTable, last: int = 10) -> dict[str, Any]:
         'optimum': [r.optimum for r in table.rows],
         'ratio': [r.ratio for r in table.rows],
         'gain_error': [r.gain_error for r in table.rows],
+        'ratio_riccati_policy': [r.ratio_riccati_policy for r in table.rows],
         'ended_by': [r.ended_by for r in table.rows],
         'max_model_residual': max((r.model_residual for r in table.rows), default=0.0),
     }
@@ -389,9 +431,10 @@ def summary(table: LegTable, last: int = 10) -> dict[str, Any]:
 def format_table(table: LegTable) -> str:
     """A Markdown table of the legs."""
     lines = ['| leg | start s | dur s | D0 m | ended | running | to go | optimum | ratio '
-             '| gain err |', '|---|---|---|---|---|---|---|---|---|---|']
+             '| vs Riccati policy | gain err |', '|---|---|---|---|---|---|---|---|---|---|---|']
     for r in table.rows:
         lines.append(f'| {r.index} | {r.start_time:.2f} | {r.duration:.2f} | {r.d0:.2f} | '
                      f'{r.ended_by} | {r.running_cost:.1f} | {r.cost_to_go:.2f} | '
-                     f'{r.optimum:.1f} | {r.ratio:.4f} | {r.gain_error:.3f} |')
+                     f'{r.optimum:.1f} | {r.ratio:.4f} | {r.ratio_riccati_policy:.4f} | '
+                     f'{r.gain_error:.3f} |')
     return '\n'.join(lines)
