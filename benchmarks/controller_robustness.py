@@ -194,20 +194,18 @@ def summarize(p: dict, res: dict) -> dict:
     return row
 
 
+UNMEASURED = ('median_ratio_riccati', 'max_deviation', 'gain_error', 'diverged', 'u_over_limit')
+"""What the table keeps of the run whose controller does not see the disturbance."""
+
+
 def _plant(i: int) -> dict:
     """Plant ``i`` of the family, driven both ways: disturbance measured and not."""
     p = sample_plant(np.random.default_rng(10_000 + i), i)
     row = summarize(p, drive(p, i))
-    if p['disturbance'] == 'none':       # nothing to measure: the same run
-        row['unmeasured'] = {k: row[k] for k in UNMEASURED}
-    else:
-        alone = summarize(p, drive(p, i, measured=False))
-        row['unmeasured'] = {k: alone[k] for k in UNMEASURED}
+    # without a disturbance there is nothing to measure: the blind run is the same run
+    blind = row if p['disturbance'] == 'none' else summarize(p, drive(p, i, measured=False))
+    row['unmeasured'] = {k: blind[k] for k in UNMEASURED}
     return row
-
-
-UNMEASURED = ('median_ratio_riccati', 'max_deviation', 'gain_error', 'diverged', 'u_over_limit')
-"""What the table keeps of the run whose controller does not see the disturbance."""
 
 
 def main() -> int:

@@ -83,6 +83,12 @@ class LegModel:
             self._step[key] = (E, 0.5 * _van_loan(self.G, self.Qc, dt))
         return self._step[key]
 
+    def step(self, x_bar: Array, u: Array, d: Array, dt: float) -> tuple[float, Array]:
+        """One step with u and d held: its running cost and the state it ends in."""
+        E, Qd = self.step_matrices(dt)
+        z = np.concatenate([x_bar, u, d, [1.0]])
+        return float(z @ Qd @ z), (E @ z)[:self.n]
+
     def value(self, x_bar: Array, tau: float) -> float:
         """½ zᵀ P(τ) z, the optimal cost-to-go at time-to-go τ."""
         z = np.append(x_bar, 1.0) if self.affine else x_bar

@@ -132,7 +132,7 @@ class LegRow:
     ended_by: LegEnd
     model_residual: float
     """max_k ‖x̄_k+1 − (plant prediction)‖ / max(‖x̄_k‖, 1e-3 m) over the leg."""
-    riccati_policy_cost: float = math.nan
+    riccati_policy_cost: float
     """The same leg flown by the true Riccati policy through the leg's recorded disturbance
     and the plant's saturation over the recorded leg's steps, plus the cost-to-go from
     there (see the module doc)."""
@@ -151,7 +151,7 @@ class LegRow:
     def ratio_riccati_policy(self) -> float:
         """Leg cost over :attr:`riccati_policy_cost`: 1 for the optimal feedback, also under a disturbance.
 
-        nan when that cost is 0 or unknown.
+        nan when that cost is 0.
         """
         c = self.riccati_policy_cost
         return self.cost / c if c > 0 else math.nan
@@ -253,12 +253,11 @@ def _running_cost(mdl: LegModel, xb: Array, nxt: Array, u: Array, d: Array, time
     running, resid = 0.0, 0.0
     for k in range(xb.shape[0]):
         dt = float(times[k + 1] - times[k])
-        z = np.concatenate([xb[k], u[k], d[k], [1.0]])
-        E, Qd = mdl.step_matrices(dt)
-        resid = max(resid, float(np.linalg.norm(nxt[k] - (E @ z)[:mdl.n]))
+        cost, predicted = mdl.step(xb[k], u[k], d[k], dt)
+        resid = max(resid, float(np.linalg.norm(nxt[k] - predicted))
                     / max(float(np.linalg.norm(xb[k])), 1e-3))
         if quadrature is Quadrature.ZOH:
-            running += float(z @ Qd @ z)
+            running += cost
         else:
             a, b = xb[k], nxt[k]
             running += 0.5 * dt * (0.5 * (a @ mdl.M @ a + b @ mdl.M @ b) + u[k] @ mdl.R @ u[k])
@@ -276,11 +275,9 @@ def _riccati_policy_cost(mdl: LegModel, x0: Array, d: Array, times: Array, T: fl
     x, cost = np.asarray(x0, dtype=float).copy(), 0.0
     for k in range(d.shape[0]):
         tau = max(T - float(times[k] - times[0]), 0.0)
-        E, Qd = mdl.step_matrices(float(times[k + 1] - times[k]))
-        u = np.clip(mdl.policy(x, tau), -limit, limit)
-        z = np.concatenate([x, u, d[k], [1.0]])
-        cost += float(z @ Qd @ z)
-        x = (E @ z)[:mdl.n]
+        step_cost, x = mdl.step(x, np.clip(mdl.policy(x, tau), -limit, limit), d[k],
+                                float(times[k + 1] - times[k]))
+        cost += step_cost
     return cost + mdl.value(x, max(T - float(times[-1] - times[0]), 0.0))
 
 

@@ -64,9 +64,8 @@ class QLearningController(WeightReadout):
         self.gamma = self.config.gamma if self.robust and self.config.gamma is not None else 0.0
         """Attenuation level γ of the game (0 in the nominal variant: d, measured or not, is no
         input it chooses and carries no cost)."""
-        self.exogenous = not self.robust and self.config.measured_disturbance and q > 0
-        """Nominal variant: the measured disturbance enters the critic's rows (d̂ = 0)."""
-        self.n, self.m, self.q = n, m, (q if self.robust or self.exogenous else 0)
+        # the nominal variant's measured disturbance enters the critic's rows with d̂ = 0
+        self.n, self.m, self.q = n, m, (q if self.config.reads_disturbance else 0)
         self.time_basis = TimeBasis(self.config.time_rates, self.config.time_powers, self.config.horizon)
         self.basis = QuadraticBasis(n, m, self.q)
         L, b = self.time_basis.size, self.basis
