@@ -77,6 +77,8 @@ def test_defaults_follow_design_example():
     assert c.force_limit == p.force_limit
     assert c.alpha_c is None and c.gamma is None
     assert sc.planner.epsilon == 0.0 and sc.obstacles == ()
+    assert sc.planner.stall_time == 10.0 and sc.planner.rrtx((0.0, 0.0)).stall_time == 10.0
+    assert parse(planner={'stall_time': math.inf}).planner.rrtx((0.0, 0.0)).stall_time == math.inf
 
 
 def test_seed_override_and_builders():
@@ -209,6 +211,8 @@ ERRORS = [
     ({'planner': [1, 2]}, 'planner', 'mapping'),
     ({'planner': {'iterations_per_step': 1.5}}, 'planner.iterations_per_step', 'integer'),
     ({'planner': {'steer': 1.0}}, 'planner.steer', 'unknown key'),
+    ({'planner': {'stall_time': 0.0}}, 'planner.stall_time', '> 0'),
+    ({'planner': {'stall_time': float('nan')}}, 'planner.stall_time', 'finite'),
     ({'bounds': {'x': [1, -1], 'y': [0, 1]}}, 'bounds.x', 'min < max'),
     ({'bounds': {'x': [0, 1]}}, 'bounds.y', 'required'),
     ({'start': [0, 0, 0]}, 'start', '[x, y]'),

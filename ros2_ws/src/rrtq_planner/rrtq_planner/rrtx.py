@@ -33,6 +33,10 @@ Deliberate deviations, each needed for a property the tests check:
 * ``propagate_descendants`` re-roots all orphans with one Dijkstra search
   (scipy) instead of queueing their neighbours with g = inf and popping them
   one by one; see its docstring for why the result is the same.
+* ``set_robot`` with a time also moves v_bot on to its parent when the robot
+  has stalled short of v_bot (``stall_time``, ``stall_progress``) and sees the
+  parent along a free segment: the paper's robot reaches every node it is
+  sent to, ours may not (a gust its controller's gain cannot overcome).
 """
 
 from __future__ import annotations

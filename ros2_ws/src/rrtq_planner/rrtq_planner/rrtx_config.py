@@ -55,6 +55,13 @@ class RRTXConfig:
     reach_tolerance : float
         m.  ``set_robot`` moves v_bot on to its parent once the robot is this
         close to v_bot.
+    stall_time, stall_progress : float
+        s, m.  ``set_robot`` with a time also moves v_bot on to its parent when
+        the robot has come no closer to v_bot by ``stall_progress`` for
+        ``stall_time`` and sees the parent along a free segment: a waypoint the
+        controller cannot reach (an optimal policy held 1.6 m off one by a
+        lateral gust, its spring balancing the push) would otherwise keep the
+        robot there for good.
     max_nodes : int or None
         Beyond this many nodes the graph stops getting denser: a sample is
         kept only where no node lies within ``FILL_FRACTION`` r(n), so the
@@ -91,6 +98,11 @@ class RRTXConfig:
                                               doc="chance an iteration samples the robot")
     reach_tolerance: float = setting(1e-3, unit="m", low=0.0,
                                      doc="v_bot moves on to its parent this close")
+    stall_time: float = setting(10.0, unit="s", low=0.0, low_open=True,
+                                doc="v_bot also moves on to a parent the robot sees when the "
+                                "robot has come no closer to v_bot for this long; inf: never")
+    stall_progress: float = setting(0.1, unit="m", low=0.0,
+                                    doc="coming this much closer to v_bot is progress")
     max_nodes: int | None = setting(None, low=2, doc="past this size the graph only fills "
                                     "gaps; None: no limit")
     path_bias: float = setting(0.0, low=0.0, high=0.9, doc="share of samples about the "

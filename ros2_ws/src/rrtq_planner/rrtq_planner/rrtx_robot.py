@@ -44,9 +44,11 @@ class RobotMixin:
         self.robot: np.ndarray | None = None
         self.vbot = -1
         self._robot_edge_free = False
+        self._progress: tuple[int, float, float] | None = None
+        """(v_bot, time s, distance m) when the robot last came closer to v_bot."""
 
-    def set_robot(self, position: np.ndarray) -> None:
-        """Tell the planner where the robot is (m); moves v_bot along the tree.
+    def set_robot(self, position: np.ndarray, t: float | None = None) -> None:
+        """Tell the planner where the robot is (m) at time ``t`` (s); moves v_bot along the tree.
 
         Before the robot has joined the tree it is inserted as a node as soon
         as it is within delta of the tree with a free segment.  Afterwards
@@ -54,7 +56,9 @@ class RobotMixin:
         ``reach_tolerance`` of it, or has moved past it (a positive projection
         on the edge v_bot -> parent) and sees the parent along a free segment;
         if the segment robot -> v_bot is blocked or v_bot lost its path, a new
-        target is searched for.
+        target is searched for.  With ``t``, v_bot also advances to a parent the
+        robot sees when the robot has stalled short of v_bot (``stall_time``,
+        ``stall_progress``; beyond the paper).
         """
         p = np.array(position, dtype=float).reshape(2)
         self.robot = p
@@ -68,14 +72,28 @@ class RobotMixin:
             nxt = int(gr.parent[v])
             off = p - gr.pos[v]
             reached = float(off @ off) <= tol2
-            passed = float(off @ (gr.pos[nxt] - gr.pos[v])) > 0.0 and bool(
-                self.obstacles.segments_free(p.reshape(1, 2), gr.pos[nxt].reshape(1, 2))[0]
-            )
-            if not (reached or passed):
+            passed = float(off @ (gr.pos[nxt] - gr.pos[v])) > 0.0 and self._sees(nxt)
+            if not (reached or passed or self._stalled(v, t) and self._sees(nxt)):
                 break
             v = nxt
         self.vbot = v
         self._check_robot_target()
+
+    def _sees(self, v: int) -> bool:
+        assert self.robot is not None
+        return bool(self.obstacles.segments_free(self.robot.reshape(1, 2),
+                                                 self.graph.pos[v].reshape(1, 2))[0])
+
+    def _stalled(self, v: int, t: float | None) -> bool:
+        """Whether the robot has come no closer to v by ``stall_progress`` for ``stall_time``."""
+        if t is None or self.robot is None:
+            return False
+        dist = float(np.hypot(*(self.robot - self.graph.pos[v])))
+        last = self._progress
+        if last is None or last[0] != v or dist < last[2] - self.config.stall_progress:
+            self._progress = (v, t, dist)
+            return False
+        return t - last[1] >= self.config.stall_time
 
     def _connect_robot(self) -> None:
         p = self.robot

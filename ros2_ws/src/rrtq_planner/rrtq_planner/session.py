@@ -33,6 +33,7 @@ class PlannerConfig:
     bounds: tuple[float, float, float, float] = like(RRTXConfig, 'bounds')
     steer_distance: float = like(RRTXConfig, 'steer_distance')
     epsilon: float = like(RRTXConfig, 'epsilon')
+    stall_time: float = like(RRTXConfig, 'stall_time')
     max_nodes: int = setting(3000, low=2, doc='past this many nodes the graph only fills '
                              'gaps (space not covered yet, or freed by a vanished obstacle)')
     iterations_per_step: int = setting(30, low=0, doc='lock-step: sampling iterations per step')
@@ -47,7 +48,8 @@ class PlannerConfig:
     def rrtx(self, goal: tuple[float, float]) -> RRTXConfig:
         """RRT^X's configuration for ``goal`` (m)."""
         return RRTXConfig(goal=goal, bounds=self.bounds, steer_distance=self.steer_distance,
-                          epsilon=self.epsilon, max_nodes=self.max_nodes)
+                          epsilon=self.epsilon, max_nodes=self.max_nodes,
+                          stall_time=self.stall_time)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,8 +145,9 @@ class PlannerSession:
         self.replans += 1
         return True
 
-    def set_robot(self, position: np.ndarray) -> None:
-        self.planner.set_robot(np.asarray(position, dtype=float)[:2])
+    def set_robot(self, position: np.ndarray, t: float | None = None) -> None:
+        """Follow the robot (position m, at time ``t`` s: the stall rule of RRTXConfig)."""
+        self.planner.set_robot(np.asarray(position, dtype=float)[:2], t)
 
     def iterate(self, iterations: int) -> None:
         """Anytime refinement: ``iterations`` sampling iterations of RRT^X."""
@@ -177,7 +180,7 @@ class PlannerSession:
             start = self._clock()
             if self.set_obstacles(dict(obstacles.read())):
                 self._repair_ms = (self._clock() - start) * 1e3
-        self.set_robot(position)
+        self.set_robot(position, stamp_ns * 1e-9)
         start = self._clock()
         done = self.refine(budget)
         cycle_ms = (self._clock() - start) * 1e3

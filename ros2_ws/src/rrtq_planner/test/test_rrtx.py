@@ -353,6 +353,40 @@ def test_robot_moves_along_path_and_retargets_when_cut_off():
     assert_path_clear(new_path, [box(ahead[0], ahead[1], 0.2, 0.2), *STATIC.values()])
 
 
+def test_a_robot_stalled_short_of_its_waypoint_moves_on_to_the_next_one_it_sees():
+    """A robot held off v_bot (a gust its controller cannot overcome) that comes no closer
+    for stall_time: v_bot moves on to its parent when the robot sees it, not before, and not
+    through an obstacle; the path then starts at the robot and stays clear."""
+    planner = build(seed=10)
+    path = planner.path()
+    first, second = path[1], path[2]
+    along = (second - first) / np.linalg.norm(second - first)
+    held = first - 1.6 * np.array([-along[1], along[0]]) - 0.05 * along   # beside it, not past
+    stall = planner.config.stall_time
+    for t in np.arange(0.0, stall, 0.05):
+        planner.set_robot(held - 0.01 * abs(np.sin(t)) * along, t)   # it wobbles, no closer
+        np.testing.assert_array_equal(planner.positions[planner.vbot], first)
+    planner.set_robot(held, stall + 0.05)
+    np.testing.assert_array_equal(planner.positions[planner.vbot], second)
+    assert planner.status is PlanStatus.FOUND
+    np.testing.assert_array_equal(planner.path()[0], held)
+    assert_path_clear(planner.path(), list(STATIC.values()))
+    # Progress resets the clock; a parent behind an obstacle is not taken.
+    again = build(seed=10)
+    wall = box(*(0.5 * (held + second)), 0.3, 0.3)
+    again.add_obstacle("wall", wall)
+    assert segments_hit_polygon(held[None], second[None], wall).any()
+    for t in np.arange(0.0, 2.0 * stall, 0.05):
+        again.set_robot(held, t)
+        assert not np.array_equal(again.positions[again.vbot], second)
+    assert again.status is PlanStatus.FOUND
+    assert_path_clear(again.path(), [wall, *STATIC.values()])
+    closer = build(seed=10)
+    for t in np.arange(0.0, 1.5 * stall, 0.05):
+        closer.set_robot(held + min(t / stall, 1.0) * 0.5 * (first - held), t)
+    np.testing.assert_array_equal(closer.positions[closer.vbot], first)
+
+
 @pytest.mark.parametrize(
     ("seed", "eps", "delta"), [(11, 0.0, 3.0), (12, 0.3, 3.0), (13, 0.0, 8.0)]
 )

@@ -43,9 +43,11 @@ _CTRL_KEYS = (
 _PLANNER_KEYS: dict[str, type] = {
     'steer_distance': PlannerConfig, 'epsilon': PlannerConfig,
     'iterations_per_step': PlannerConfig, 'max_nodes': PlannerConfig,
-    'cycle_budget_ms': PlannerConfig, 'tree_period_s': PlannerConfig,
+    'cycle_budget_ms': PlannerConfig, 'tree_period_s': PlannerConfig, 'stall_time': PlannerConfig,
     'goal_tolerance': MissionConfig, 'growth_threshold': SafetyConfig,
 }
+_UNBOUNDED = frozenset({'stall_time'})
+"""Planner keys that may be .inf (never)."""
 
 
 def _choice(r: Reader, data: dict[str, Any], name: str, cls: type, section: str) -> Any:
@@ -236,7 +238,8 @@ def read_planner(r: Reader, raw: Any,
     """
     key = 'planner'
     data = r.mapping({} if raw is None else raw, key, (*_PLANNER_KEYS, 'guidance'))
-    values = {name: r.setting(data, name, cls, key) for name, cls in _PLANNER_KEYS.items()}
+    values = {name: r.setting(data, name, cls, key, allow_inf=name in _UNBOUNDED)
+              for name, cls in _PLANNER_KEYS.items()}
     (x0, x1), (y0, y1) = world.bounds
     planner = PlannerConfig(bounds=(x0, x1, y0, y1), **{
         name: values[name] for name, cls in _PLANNER_KEYS.items() if cls is PlannerConfig})
