@@ -80,6 +80,7 @@ class RobotMixin:
         self._check_robot_target()
 
     def _sees(self, v: int) -> bool:
+        """Whether the straight segment robot -> node v is free."""
         assert self.robot is not None
         return bool(self.obstacles.segments_free(self.robot.reshape(1, 2),
                                                  self.graph.pos[v].reshape(1, 2))[0])
@@ -121,10 +122,7 @@ class RobotMixin:
         v = self.vbot
         if p is None or v < 0 or not self.graph.g[v] < INF:
             return False
-        q = self.graph.pos[v]
-        if np.array_equal(p, q):
-            return True
-        return bool(self.obstacles.segments_free(p.reshape(1, 2), q.reshape(1, 2))[0])
+        return bool(np.array_equal(p, self.graph.pos[v])) or self._sees(v)
 
     def _check_robot_target(self) -> None:
         """Settle v_bot and retarget when its edge became invalid."""
