@@ -58,7 +58,7 @@ class RobotMixin:
         if the segment robot -> v_bot is blocked or v_bot lost its path, a new
         target is searched for.  With ``t``, v_bot also advances to a parent the
         robot sees when the robot has stalled short of v_bot (``stall_time``,
-        ``stall_progress``; beyond the paper).
+        ``stall_progress``, counted only while v_bot has a path; beyond the paper).
         """
         p = np.array(position, dtype=float).reshape(2)
         self.robot = p
@@ -68,6 +68,10 @@ class RobotMixin:
         gr = self.graph
         tol2 = self.config.reach_tolerance**2
         v = self.vbot
+        if not gr.g[v] < INF:
+            # No path: the controller holds the robot by design (an empty plan), which is
+            # not a stall; the clock starts again when a path is found.
+            self._progress = None
         while v != self.goal and gr.parent[v] >= 0:
             nxt = int(gr.parent[v])
             off = p - gr.pos[v]
@@ -197,6 +201,10 @@ class RobotMixin:
         gr = self.graph
         chain = [self.vbot]
         v = self.vbot
+        if not gr.g[v] < INF:
+            # No path: the controller holds the robot by design (an empty plan), which is
+            # not a stall; the clock starts again when a path is found.
+            self._progress = None
         while v != self.goal:
             v = int(gr.parent[v])
             if v < 0 or len(chain) > gr.n:

@@ -387,6 +387,34 @@ def test_a_robot_stalled_short_of_its_waypoint_moves_on_to_the_next_one_it_sees(
     np.testing.assert_array_equal(closer.positions[closer.vbot], first)
 
 
+def test_a_robot_held_while_the_goal_is_cut_off_is_not_stalled():
+    """Without a path the controller holds the robot (an empty plan): that is not a stall.
+    The clock starts when the path is back, and v_bot moves on one stall_time later."""
+    planner = build(seed=10)
+    path = planner.path()
+    first, second = path[1], path[2]
+    along = (second - first) / np.linalg.norm(second - first)
+    held = first - 1.6 * np.array([-along[1], along[0]]) - 0.05 * along
+    stall = planner.config.stall_time
+    fence = {"fs": box(15.0, 12.0, 3.2, 0.2), "fn": box(15.0, 18.0, 3.2, 0.2),
+             "fw": box(12.0, 15.0, 0.2, 3.2), "fe": box(18.0, 15.0, 0.2, 3.2)}
+    planner.set_robot(held, 0.0)
+    for oid, poly in fence.items():
+        planner.add_obstacle(oid, poly)
+    for t in np.arange(0.05, 2.0 * stall, 0.05):
+        planner.set_robot(held, t)
+        assert planner.status is PlanStatus.NO_PATH
+    for oid in fence:
+        planner.remove_obstacle(oid)
+    back = 2.0 * stall
+    for t in np.arange(back, back + stall - 0.05, 0.05):
+        planner.set_robot(held, t)
+        assert planner.status is PlanStatus.FOUND
+        np.testing.assert_array_equal(planner.positions[planner.vbot], first)
+    planner.set_robot(held, back + stall + 0.05)
+    np.testing.assert_array_equal(planner.positions[planner.vbot], second)
+
+
 @pytest.mark.parametrize(
     ("seed", "eps", "delta"), [(11, 0.0, 3.0), (12, 0.3, 3.0), (13, 0.0, 8.0)]
 )
