@@ -443,7 +443,10 @@ class LearnedBoundPolicy:
         near = np.hypot(*(self.cells - state[:2]).T) <= reach
         region = near & np.logical_or.reduce([b.visited for b in blocks])
         idx = np.flatnonzero(region)
-        supported = math.sqrt(c.ridge) * fit.spread(self._cell_phi[idx]) <= c.support
+        # ‖φ‖_{V⁻¹} of every cell, once per fit: the support, the band and the firm cells.
+        spread = fit.spread(self._cell_phi)
+        firm = math.sqrt(c.ridge) * spread <= c.support
+        supported = firm[idx]
         self.region = np.zeros_like(region)
         self.region[idx[supported]] = True
         # The bound of every cell, in units of the prior bound (|d_i| <= level R_i for every
@@ -453,9 +456,8 @@ class LearnedBoundPolicy:
         # refuted and, as in Jha's Alg. 1, the bound is raised to the largest such residual
         # (the band, which would certify it, is confounded with the model along a straight
         # route: docs/margins.md §5.1).
-        mean, half = fit.band(self._cell_phi)
+        mean, half = fit.band(self._cell_phi, spread)
         upper = ((np.abs(mean) + half) / self._prior_residual).max(axis=1)
-        firm = math.sqrt(c.ridge) * fit.spread(self._cell_phi) <= c.support
         refuted = self.observed > 1.0
         self.cell_bound = np.where(refuted, self.observed, np.minimum(upper, 1.0))
         visited = np.logical_or.reduce([b.visited for b in blocks])

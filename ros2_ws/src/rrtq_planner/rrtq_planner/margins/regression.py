@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 import numpy.typing as npt
-from scipy.linalg import cho_factor, cho_solve
+from scipy.linalg import cho_factor, cho_solve, solve_triangular
 from scipy.stats import norm
 
 __all__ = ['RBFFeatures', 'FieldStatistics', 'FieldFit', 'fit_field']
@@ -159,13 +159,24 @@ class FieldFit:
         return phi @ self.weights
 
     def spread(self, phi: np.ndarray) -> np.ndarray:
-        """‖φ(p)‖_{V⁻¹} at feature rows (k, p): (k,)."""
-        sol = cho_solve(self._chol, phi.T)
-        return np.sqrt(np.maximum((phi.T * sol).sum(axis=0), 0.0))
+        """‖φ(p)‖_{V⁻¹} at feature rows (k, p): (k,).
 
-    def band(self, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Simultaneous band (mean, half-width), each (k, n_out): Abbasi-Yadkori et al. Thm 2."""
-        return self.mean(phi), self.spread(phi)[:, None] * self.beta[None, :]
+        One triangular solve: with V = UᵀU (or LLᵀ), φᵀV⁻¹φ = ‖U⁻ᵀφ‖² (‖L⁻¹φ‖²).
+        """
+        factor, lower = self._chol
+        half = solve_triangular(factor, phi.T, lower=lower, trans='N' if lower else 'T',
+                                check_finite=False)
+        return np.sqrt((half * half).sum(axis=0))
+
+    def band(self, phi: np.ndarray, spread: np.ndarray | None = None
+             ) -> tuple[np.ndarray, np.ndarray]:
+        """Simultaneous band (mean, half-width), each (k, n_out): Abbasi-Yadkori et al. Thm 2.
+
+        ``spread``: :meth:`spread` at the same rows, when the caller has it already.
+        """
+        if spread is None:
+            spread = self.spread(phi)
+        return self.mean(phi), spread[:, None] * self.beta[None, :]
 
     def pointwise_band(self, phi: np.ndarray, delta: float) -> tuple[np.ndarray, np.ndarray]:
         """Jha's eq. 9, (centre, half-width) each (k, n_out), for comparison only.
