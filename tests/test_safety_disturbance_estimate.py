@@ -15,6 +15,7 @@ deviations (margins.png).
 import json
 import pathlib
 import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -128,3 +129,10 @@ def test_the_published_margin_covers_the_realised_deviations_from_the_recording_
     assert cov.passed, cov.as_dict()
     assert all(leg.margin > 0.0 for leg in cov.legs)        # a margin was published for each
     assert not statuses(run / 'run.mcap')[-1].collision
+    # The command line's --json gives the same verdict, leg by leg.
+    proc = subprocess.run([sys.executable, '-m', 'rrtq_bringup.margin_coverage', '--json',
+                           str(run / 'run.mcap')], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    table = json.loads(proc.stdout)
+    assert (table['legs'], table['misses']) == (len(cov.legs), cov.misses)
+    assert [leg['covered'] for leg in table['per_leg']] == [leg.covered for leg in cov.legs]

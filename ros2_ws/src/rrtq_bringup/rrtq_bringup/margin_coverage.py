@@ -60,7 +60,7 @@ class LegCoverage:
 
     @property
     def covered(self) -> bool:
-        return self.deviation <= self.margin + TOLERANCE
+        return bool(self.deviation <= self.margin + TOLERANCE)
 
 
 @dataclasses.dataclass(frozen=True)
