@@ -67,9 +67,11 @@ class LearnedBoundConfig:
                                 doc='1 - delta of the simultaneous band (and of the noise '
                                 'part of the tube)')
     window: int = setting(50, low=1, doc='legs of residual data the field is fitted on')
-    feature_spacing: float = setting(4.0, unit='m', low=0.0, low_open=True,
-                                     doc='spacing and length scale of the radial basis '
-                                     'functions')
+    feature_spacing: float = setting(
+        2.0, unit='m', low=0.0, low_open=True,
+        doc='spacing and length scale of the radial basis functions: at most the length '
+        "scale of the field, or what they cannot fit leaks into the model's coefficients "
+        '(docs/margins.md, section 4.2: at 4 m a 3 m bump softened the learned loop 3x)')
     ridge: float = setting(1.0, low=0.0, low_open=True,
                            doc='lambda of the regression (the features are of order 1)')
     prior_bound: float = setting(
@@ -88,7 +90,7 @@ class LearnedBoundConfig:
                            doc='a cell counts as visited when a residual was taken within '
                            'this distance')
     support: float = setting(
-        0.3, low=0.0, low_open=True,
+        0.5, low=0.0, low_open=True,
         doc="the band's supremum is taken over the visited cells within twice the longest "
         'leg of the window (at least twice feature_spacing) of the robot where the data have '
         "cut the band's width to at most this fraction of the prior's: where the next legs "
