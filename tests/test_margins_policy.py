@@ -195,33 +195,42 @@ def test_learned_bound_levels_follow_the_cells_the_robot_can_reach_on_its_leg():
     assert policy.model_margin == pytest.approx(policy.across.max())
 
 
-def _straight_route(policy, seed, steps=2400):
+STIFF = np.array([[5.0, 0.0, 5.0, 0.0], [0.0, 5.0, 0.0, 5.0]])
+
+
+def _straight_route(policy, seed, steps=2400, gain=STIFF, hold=0, each=None):
     """narrow_gap in small: the paper's rover (spring at the leg target) under a fixed gain,
     back and forth along a straight route through a narrow bump of lateral acceleration (3 m,
-    1.2 m/s²), with probing that decays leg by leg. Returns the true plant."""
-    gain = np.array([[5.0, 0.0, 5.0, 0.0], [0.0, 5.0, 0.0, 5.0]])
+    1.2 m/s²), with probing that decays leg by leg. Then, for ``hold`` steps, a hold where the
+    robot is (a leg to its own position, as the controller's when it has no plan), calling
+    ``each(policy)`` after every step of it. Returns the true plant."""
     a_mat, b_mat = rover_matrices(40.0, 20.0, 45.0)
     plant = Plant(a_mat, b_mat, compose_input_matrix(None, 4), 0.05, 1000.0)
     field = DisturbanceField([Bump((6.0, 6.0), 3.0, (0.0, 1.2))])
     rng = np.random.default_rng(seed)
-    probe = lfilter([np.sqrt(1 - 0.95**2)], [1.0, -0.95], rng.standard_normal((steps, 2)), axis=0)
+    probe = lfilter([np.sqrt(1 - 0.95**2)], [1.0, -0.95],
+                    rng.standard_normal((steps + hold, 2)), axis=0)
     xs = np.linspace(0.0, 12.0, 5)
     route = np.column_stack([np.r_[xs, xs[::-1], xs], 6.0 + rng.normal(0.0, 0.3, 15)])
     legs = LegSequencer(rho=0.15, horizon=10.0)
     x = np.r_[route[0] - (2.0, 0.0), 0.0, 0.0]
     legs.set_plan(route, x, 0.0)
     prev = None
-    for k in range(steps):
+    for k in range(steps + hold):
         t = 0.05 * k
+        if k == steps:
+            legs.set_plan(x[None, :2], x, t)
         policy.step(MarginSample(t, x) if prev is None else MarginSample(
             t, x, prev[0], prev[1], prev[2], lambda tau: gain, 10.0))
+        if k >= steps and each is not None:
+            each(policy)
         legs.update(x, t)
         leg = legs.leg
         p = 2.0 * 0.8 ** leg.index * probe[k]
         u = -gain @ (x - leg.target) + p
         prev = (LegInfo(leg.index, leg.x0[:2].copy(), leg.target[:2].copy(), leg.d0), u, p)
         x = plant.step(x - leg.target, u, field.acceleration(x), np.zeros(2)) + leg.target
-    return plant, gain
+    return plant
 
 
 @pytest.mark.parametrize('seed', [0, 1, 2])
@@ -235,8 +244,8 @@ def test_the_features_are_fine_enough_that_a_narrow_bump_does_not_soften_the_lea
         extra = {} if spacing is None else {'feature_spacing': spacing}
         policy = LearnedBoundPolicy(LearnedBoundConfig(region=((-4.0, 16.0), (-4.0, 16.0)),
                                                        dt=0.05, **extra))
-        plant, gain = _straight_route(policy, seed)
-        gains = np.repeat(gain[None], 200, axis=0)
+        plant = _straight_route(policy, seed)
+        gains = np.repeat(STIFF[None], 200, axis=0)
         tubes = [leg_tube_terms(phi, gamma, gains, policy._prior_residual, None, 16)[0]
                  .sum(axis=1).max() for phi, gamma in
                  ((policy.theta[:, :4], policy.theta[:, 4:]), (plant.phi, plant.gamma_u))]
@@ -244,3 +253,28 @@ def test_the_features_are_fine_enough_that_a_narrow_bump_does_not_soften_the_lea
         if spacing is None:
             assert np.abs(policy.theta[2:, :4] - plant.phi[2:]).max() < 0.02
     assert 1.0 - 1e-3 <= ratios[None] <= 1.32 < ratios[4.0], ratios
+
+
+def test_a_far_obstacles_margin_does_not_shrink_while_the_robot_holds():
+    """A far obstacle is grown by a prediction for a whole future leg. A fit within the
+    current leg re-anchors the leg's own tube over the rest of it, and must not shorten that
+    prediction: when it did, a held robot's far walls opened at the second fit, the leg that
+    started then shut them again, and the plan flickered (docs/margins.md §9). The loop is as
+    soft as narrow_gap's learned one (R = 2), whose tube still grows after 6 s."""
+    soft = np.array([[0.12, 0.0, 0.17, 0.0], [0.0, 0.12, 0.0, 0.17]])
+    wall = np.array([[4.0, 13.0], [8.0, 13.0], [8.0, 14.0], [4.0, 14.0]])   # never visited
+    margins, tubes = [], []
+
+    def each(policy):
+        margins.append(policy.obstacle_margin('wall', wall))
+        tubes.append(len(policy.tube))
+
+    _straight_route(LearnedBoundPolicy(LearnedBoundConfig(region=((-4.0, 16.0), (-4.0, 16.0)),
+                                                          dt=0.05)),
+                    seed=0, steps=1200, gain=soft, hold=160, each=each)
+    # The hold's leg starts at the second sample (a sample carries the leg of the force
+    # applied before it); three fits follow within it.
+    margins, tubes = margins[1:], tubes[1:]
+    assert min(tubes) < max(tubes)                     # the leg's own tube was re-anchored
+    assert margins[0] > 0.0
+    assert min(margins) >= margins[0] - 1e-9, (margins[0], min(margins))

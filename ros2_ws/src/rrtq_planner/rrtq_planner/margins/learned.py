@@ -224,6 +224,10 @@ class LearnedBoundPolicy:
         """Worst-case deviation per unit bound over a leg (:func:`.tube.tube_gains`)."""
         self.spread: np.ndarray | None = None
         """Standard deviation of the random deviation over a leg (:func:`.tube.random_deviation`)."""
+        self.whole_leg: tuple[np.ndarray, np.ndarray] | None = None
+        """(tube, spread) of the current leg from its start: the far obstacles' prediction for
+        a whole future leg, which a fit within the leg (re-anchored over the rest of it) must
+        not shorten (docs/margins.md §9: the livelock)."""
         self.cell_bound: np.ndarray | None = None
         """Per cell, the bound of the field in units of R (max over components) after the last
         fit: min(upper band, 1), or max(upper band, residual) where a residual refuted R."""
@@ -548,6 +552,8 @@ class LearnedBoundPolicy:
         the leg): the rest of the leg, from the current state on (§5.1, re-anchoring).
         """
         self.path = None
+        if state is None:
+            self.whole_leg = None
         if sample.gain is None or sample.horizon <= 0.0 or self.theta is None \
                 or sample.leg is None or not self.legs.started:
             self.tube = None
@@ -590,6 +596,8 @@ class LearnedBoundPolicy:
         std, corr = source.probing_statistics(self.m) if source is not None else (0.0, 0.0)
         self.spread, along_spread = leg_spread(
             position_covariance(phi, gamma, gains, self.sigma, std, corr), normal)
+        if state is None:
+            self.whole_leg = (self.tube, self.spread)
         self.path, self.path_deviation = nominal_path(phi, gamma, offset, gains, start, target,
                                                       origin)
         # A zero-length leg has no line: its deviation is the distance from the target, which
@@ -607,9 +615,10 @@ class LearnedBoundPolicy:
             np.array([g for _, _, g in starts])).max())
         self._local.clear()
 
-    def _z(self) -> float:
+    def _z(self, tube: np.ndarray | None = None) -> float:
         # The random part must hold over the whole leg: a union bound over its steps.
-        steps = len(self.tube) if self.tube is not None else 1
+        tube = self.tube if tube is None else tube
+        steps = len(tube) if tube is not None else 1
         return float(norm.ppf(1.0 - 0.5 * self._delta / steps))
 
     def _model_margin(self) -> float:
@@ -643,13 +652,13 @@ class LearnedBoundPolicy:
         return generic
 
     def _neighbourhood_margin(self, shape: shapely.Polygon) -> float:
-        if self.cell_bound is None or self.tube is None or self.spread is None:
+        if self.cell_bound is None or self.tube is None or self.whole_leg is None:
             return max(self._margin(), self.legs.leg_max)
-        z = self._z()
+        tube, spread = self.whole_leg
+        z = self._z(tube)
         dist = np.asarray(shapely.distance(shape, self._cell_points), dtype=float)
         scale = self.config.feature_spacing
         pad = self.config.cell * math.sqrt(0.5)
-        tube, spread = self.tube, self.spread
         level, _ = self._least_level(
             self.cell_bound,
             lambda lv: np.asarray(dist <= scale + 2.0 * float((lv * tube + z * spread).max())
