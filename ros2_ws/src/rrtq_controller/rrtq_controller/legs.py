@@ -99,21 +99,36 @@ class LegSequencer:
         When the plan passes through the current leg's target (within ``skip_radius``),
         the leg continues and the waypoints after the target follow it; the controller's
         own progress (the window D <= ρ D0) is kept even where the planner's notion of
-        the robot's next waypoint lags behind. Otherwise the plan is adopted afresh
-        (:meth:`set_plan`). Returns True when a new leg started.
+        the robot's next waypoint lags behind: the waypoints before the target must all be
+        behind the robot (:meth:`_behind`). A plan with a waypoint ahead of the robot
+        before the target is a new route to it (the straight way to the target is not what
+        the planner checked): it is adopted afresh (:meth:`set_plan`), as is a plan that no
+        longer passes through the target. Returns True when a new leg started.
         """
         pts = np.asarray(waypoints, dtype=float).reshape(-1, 2)
         if self.leg is not None and len(pts):
             hits = np.flatnonzero(
                 np.linalg.norm(pts - self.leg.target[:2], axis=1) <= self.skip_radius)
-            if hits.size:
-                j = int(hits[-1])
+            hits = [int(j) for j in hits if self._behind(pts[:j + 1], x[:2])]
+            if hits:
+                j = hits[-1]
                 self._waypoints = [p for p in pts]
                 self._next = j
                 if j < len(pts) - 1:
                     self.goal_reached = False
                 return False
         return self.set_plan(pts, x, t) is not None
+
+    def _behind(self, pts: Array, p: Array) -> bool:
+        """Whether the robot at p is past every waypoint of pts but the last.
+
+        Past a waypoint: within ``skip_radius`` of it, or beyond it along the plan's edge
+        to the next one.
+        """
+        for a, b in zip(pts[:-1], pts[1:]):
+            if np.linalg.norm(p - a) > self.skip_radius and float((p - a) @ (b - a)) <= 0.0:
+                return False
+        return True
 
     def target_state(self, waypoint: Array) -> Array:
         """x_r: the waypoint position at rest."""

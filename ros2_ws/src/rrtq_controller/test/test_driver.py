@@ -35,6 +35,26 @@ def test_follow_plan_keeps_the_leg_when_the_target_stays():
     assert legs.leg.index == 1 and np.allclose(legs.leg.target[:2], [0, 2])
 
 
+def test_a_plan_that_reaches_the_target_another_way_starts_a_new_leg():
+    """The leg's target reappearing later in a plan is not the same route: the waypoints
+    before it lie ahead of the robot, and the straight way to the target is not what the
+    planner checked (a robot sent straight at its goal cut a wall's corner). A waypoint the
+    robot has already passed (the planner lagging) does not break the leg."""
+    legs = LegSequencer(rho=0.15, horizon=10.0)
+    x = np.array([-8.0, -1.5, 0.0, 0.0])
+    assert legs.follow_plan([[15.0, -1.0]], x, 0.0)                  # straight at the goal
+    assert legs.follow_plan([[4.7, 0.0], [8.8, -0.7], [15.0, -1.0]], x, 0.1)
+    assert legs.leg.index == 1 and np.allclose(legs.leg.target[:2], [4.7, 0.0])
+    # The robot reaches its window and moves on to the next waypoint by itself; the
+    # planner, lagging, still names the one it has passed: the leg goes on.
+    x = np.array([4.6, 0.0, 1.0, 0.0])
+    legs.update(x, 0.2)
+    assert legs.leg.index == 2 and np.allclose(legs.leg.target[:2], [8.8, -0.7])
+    x = np.array([5.5, -0.1, 1.0, 0.0])
+    assert not legs.follow_plan([[4.7, 0.0], [8.8, -0.7], [15.0, -1.0]], x, 0.3)
+    assert legs.leg.index == 2
+
+
 def test_driver_walks_the_waypoints_to_the_goal():
     dt = 0.05
     phi, gam = zoh(dt)
