@@ -107,9 +107,9 @@ class LegSequencer:
         """
         pts = np.asarray(waypoints, dtype=float).reshape(-1, 2)
         if self.leg is not None and len(pts):
-            hits = np.flatnonzero(
+            near = np.flatnonzero(
                 np.linalg.norm(pts - self.leg.target[:2], axis=1) <= self.skip_radius)
-            hits = [int(j) for j in hits if self._behind(pts[:j + 1], x[:2])]
+            hits = [int(j) for j in near if self._behind(pts[:j + 1], x[:2])]
             if hits:
                 j = hits[-1]
                 self._waypoints = [p for p in pts]
