@@ -201,10 +201,6 @@ class RobotMixin:
         gr = self.graph
         chain = [self.vbot]
         v = self.vbot
-        if not gr.g[v] < INF:
-            # No path: the controller holds the robot by design (an empty plan), which is
-            # not a stall; the clock starts again when a path is found.
-            self._progress = None
         while v != self.goal:
             v = int(gr.parent[v])
             if v < 0 or len(chain) > gr.n:
