@@ -447,14 +447,11 @@ class LearnedBoundPolicy:
         self._refutations(blocks)
         reach = 2.0 * max([d0 for d0 in self._leg_lengths()] + [c.feature_spacing])
         near = np.hypot(*(self.cells - state[:2]).T) <= reach
-        region = near & np.logical_or.reduce([b.visited for b in blocks])
-        idx = np.flatnonzero(region)
-        # ‖φ‖_{V⁻¹} of every cell, once per fit: the support, the band and the firm cells.
+        visited = np.logical_or.reduce([b.visited for b in blocks])
+        # ‖φ‖_{V⁻¹} of every cell, once per fit: the band, and where the data support it.
         spread = fit.spread(self._cell_phi)
         firm = math.sqrt(c.ridge) * spread <= c.support
-        supported = firm[idx]
-        self.region = np.zeros_like(region)
-        self.region[idx[supported]] = True
+        self.region = near & visited & firm
         # The bound of every cell, in units of the prior bound (|d_i| <= level R_i for every
         # component): the upper band, capped by the prior bound R (Jha's assumption 3.1: the
         # minimum of two bounds, each valid under its assumption) -- except where a residual
@@ -466,7 +463,6 @@ class LearnedBoundPolicy:
         upper = ((np.abs(mean) + half) / self._prior_residual).max(axis=1)
         refuted = self.observed > 1.0
         self.cell_bound = np.where(refuted, self.observed, np.minimum(upper, 1.0))
-        visited = np.logical_or.reduce([b.visited for b in blocks])
         self._cell_band = (mean, half, firm & visited)
         self.fits += 1
 
