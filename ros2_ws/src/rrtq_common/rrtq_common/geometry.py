@@ -22,6 +22,7 @@ __all__ = [
     'disc_intersects_polygon',
     'kinodynamic_distance',
     'ray_distance',
+    'segment_distance',
 ]
 
 
@@ -188,9 +189,26 @@ def ray_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
     learning policy's overshoot there is measured as the paper measures it. A leg of zero
     length is its start: the distance from it.
     """
+    return _clipped_distance(leg_start, leg_target, position, math.inf)
+
+
+def segment_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
+                     position: npt.ArrayLike) -> float:
+    """The robot's distance (m) from the segment from the leg's start to its target.
+
+    :func:`ray_distance` clipped at the target as well: for a leg too short to have a line
+    (holding station), where a robot past the target has left it as much as one behind the
+    start.
+    """
+    return _clipped_distance(leg_start, leg_target, position, 1.0)
+
+
+def _clipped_distance(leg_start: npt.ArrayLike, leg_target: npt.ArrayLike,
+                      position: npt.ArrayLike, upper: float) -> float:
+    """m: the distance from the points start + s (target - start), 0 <= s <= ``upper``."""
     a = np.asarray(leg_start, dtype=float)[:2]
     ab = np.asarray(leg_target, dtype=float)[:2] - a
     ap = np.asarray(position, dtype=float)[:2] - a
     len2 = float(ab @ ab)
-    s = 0.0 if len2 < 1e-24 else max(float(ap @ ab) / len2, 0.0)
+    s = 0.0 if len2 < 1e-24 else min(max(float(ap @ ab) / len2, 0.0), upper)
     return math.hypot(*(ap - s * ab))

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import shapely
 
-from rrtq_common.geometry import kinodynamic_distance, ray_distance
+from rrtq_common.geometry import kinodynamic_distance, ray_distance, segment_distance
 from rrtq_planner.safety import SafetyConfig, SafetyMonitor, augment, clearance
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]])
@@ -28,6 +28,18 @@ def test_ray_distance_matches_shapely_and_bounds_d_rob():
     assert ray_distance([0, 0], [10, 0], [-1.5, 0.0]) == pytest.approx(1.5)   # behind
     assert ray_distance([2, 2], [2, 2], [5, 6]) == pytest.approx(5.0)         # a point
 
+
+
+def test_segment_distance_matches_shapely():
+    """The distance from a leg's segment (a short leg's, holding station) against shapely's."""
+    rng = np.random.default_rng(4)
+    for _ in range(200):
+        a, b, p = rng.uniform(-5, 5, (3, 2))
+        exact = shapely.LineString([a, b]).distance(shapely.Point(p))
+        assert segment_distance(a, b, p) == pytest.approx(exact, abs=1e-9)
+        assert segment_distance(a, b, p) >= ray_distance(a, b, p) - 1e-12
+    assert segment_distance([0, 0], [10, 0], [14, -3.0]) == pytest.approx(5.0)  # past the target
+    assert segment_distance([2, 2], [2, 2], [5, 6]) == pytest.approx(5.0)       # a point
 
 def test_kinodynamic_distance_is_the_distance_to_the_leg_line():
     # Leg from (0, 0) to (10, 0): the deviation is |y|, wherever along the line.
