@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from rrtq_common.geometry import kinodynamic_distance, ray_distance
+from rrtq_common.geometry import kinodynamic_distance, ray_distance, segment_distance
 
 Array = NDArray[np.float64]
 
@@ -116,9 +116,15 @@ class DivergenceWatch:
     the robust learning test, which braking there made learn worse), and the leg is then
     near its end. :attr:`off_line` says that this criterion tripped (the controller then
     brakes, :class:`Brake`, until the margin and the plan have caught up with the robot). Every
-    leg is measured from its own start, restarted or not; a leg no longer than
+    leg is measured from its own start, restarted or not. A leg no longer than
     ``deviation`` (holding station, or a robot told to stop where it is while moving) has
-    no line at that scale and is not watched for it.
+    no line at that scale: it is its segment, and the robot trips the watch farther than
+    ``widest`` + ``deviation`` from it, plus the way its speed at the leg's start covers in
+    ``stop_time`` (the brake's stopping time: a policy that stops the robot no shorter than
+    the brake would is not holding it). Seen on an 80 kg rover from the defaults: the goal
+    cut off, the hold leg's target 0.05 m away, an unstable policy drove the robot 2.3 m
+    from it before D tripped (at 2 D0 + 1 of the reference leg), and the margin grew by as
+    much.
     It trips at most once per leg (the controller starts it afresh where a brake has
     stopped the robot).
     """
@@ -141,6 +147,10 @@ class DivergenceWatch:
     line: Array | None = None
     """The current leg's start seen from its target, x̄0[:2] (None before the first leg)."""
     line_limit: float = math.inf
+    stop_time: float = 0.0
+    """s: a short leg allows the way its initial speed covers in this time (see above)."""
+    short: bool = False
+    """Whether the current leg is no longer than ``deviation`` (watched as its segment)."""
     leg_d0: float = math.inf
     """The current leg's own D0 (the reference's is :attr:`d0`)."""
 
@@ -164,8 +174,9 @@ class DivergenceWatch:
         self.tripped = self.off_line = False
         self.line = x0[:2].copy()
         self.leg_d0 = float(np.linalg.norm(x0))
-        short = float(np.linalg.norm(self.line)) <= self.deviation   # no line at that scale
-        self.line_limit = math.inf if short else self.widest + self.deviation
+        self.short = float(np.linalg.norm(self.line)) <= self.deviation   # no line at that scale
+        coast = float(np.linalg.norm(x0[2:])) * self.stop_time if self.short else 0.0
+        self.line_limit = self.widest + self.deviation + coast
         if not renew and self.d0 > 1e-9:
             if moved is None or self.offset is None:
                 self.offset = None
@@ -193,6 +204,14 @@ class DivergenceWatch:
         if v > self.speed_bound:
             self.tripped = True
             return f'speed {v:.3g} > {self.speed_bound:.3g} (bound from the leg length and T)'
+        if self.short:
+            off = self.distance_from_segment(x)
+            if off > self.line_limit:
+                self.tripped = self.off_line = True
+                return (f'{off:.3g} m from its short leg > {self.widest:.3g} m (the widest '
+                        f'before) + {self.deviation:g} + {self.line_limit - self.widest - self.deviation:.3g}'
+                        f' (its initial speed for {self.stop_time:g} s)')
+            return ''
         off = self.distance_from_ray(x)
         if off > self.line_limit:
             self.tripped = self.off_line = True
@@ -203,6 +222,10 @@ class DivergenceWatch:
     def distance_from_line(self, x: Array) -> float:
         """m: D_rob of x̄ on the current leg (its start x̄0, its target the origin of x̄)."""
         return 0.0 if self.line is None else kinodynamic_distance(self.line, (0.0, 0.0), x)
+
+    def distance_from_segment(self, x: Array) -> float:
+        """m: x̄'s distance from the current leg's segment (from x̄0 to the origin of x̄)."""
+        return 0.0 if self.line is None else segment_distance(self.line, (0.0, 0.0), x)
 
     def distance_from_ray(self, x: Array) -> float:
         """m: x̄'s distance from the current leg's ray (from x̄0 through the origin of x̄)."""

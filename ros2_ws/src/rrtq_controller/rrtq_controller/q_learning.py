@@ -91,7 +91,7 @@ class QLearningController(WeightReadout):
         """The actors' weights when a leg last entered its window (the revert point)."""
         self._watch = DivergenceWatch(c.divergence_distance, c.divergence_floor,
                                       c.divergence_speed, c.horizon,
-                                      deviation=c.divergence_deviation)
+                                      deviation=c.divergence_deviation, stop_time=c.hold_stop_time)
         self._held = False
         self._brake = Brake(c.force_limit, c.hold_stop_time, c.dt)
         self._keep_off = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time)
@@ -140,11 +140,14 @@ class QLearningController(WeightReadout):
         renew = True   # a fresh divergence reference: first leg, completed leg, a revert
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
-            if not ran_out if completed is None else completed:
+            entered = not ran_out if completed is None else completed
+            if entered:
                 self.completed_leg()
             else:
                 renew = self._held
-            self._full_legs = self._full_legs + 1 if ran_out else 0
+            # a leg that a new plan cut short says nothing of the policy: the streak of
+            # legs that ran their horizon goes on through it, and ends at a window
+            self._full_legs = self._full_legs + 1 if ran_out else 0 if entered else self._full_legs
             c = self.config
             if (self._full_legs >= c.widen_after_legs and c.widen_powers and not self.widened
                     and isinstance(self.critic, LeastSquaresCritic)):

@@ -120,6 +120,30 @@ def test_a_status_quo_that_stopped_reaching_its_targets_no_longer_blocks_learnin
     assert ctrl._events[-1][0] is PolicyEvent.ADOPTED
 
 
+def test_a_leg_a_new_plan_cut_short_does_not_end_the_streak_of_legs_that_ran_out():
+    """Seen on an 80 kg rover from the defaults: the planner's stall rule cut every other leg
+    about 1.4 s after a leg that had run its horizon, so the streak of such legs never
+    reached ``widen_after_legs`` and the time basis widened only at 74 s (at 21.5 s once
+    the cut legs were let through). A cut leg says nothing of the policy; a window does."""
+    ctrl, _ = _learned(3)
+    ctrl.completed_leg()
+    ctrl._definite_value = lambda *args: False           # a critic that identifies too little
+    x, t = np.array([-3.0, 1.0, 0.0, 0.0]), ctrl._t0
+    for _ in range(ctrl.config.widen_after_legs - 1):
+        t += T
+        ctrl.start_leg(x, t)                             # ran its horizon
+        t += 1.4
+        ctrl.start_leg(x, t, completed=False)            # a new plan cut it short
+        assert ctrl._events[-1][0] is PolicyEvent.REJECTED
+    t += T
+    ctrl.start_leg(x, t)
+    assert ctrl._events[-1][0] is PolicyEvent.ADOPTED
+    t += 2.0
+    ctrl.start_leg(x, t, completed=True)                 # a leg that reached its window
+    ctrl.start_leg(x, t + 1.4, completed=False)
+    assert ctrl._events[-1][0] is PolicyEvent.REJECTED   # the streak ended there
+
+
 def test_a_diverging_leg_reverts_to_the_last_policy_that_completed_a_leg():
     """A destabilising gain (positive feedback) adopted after good learning: the leg's D
     runs away, the controller reverts to the policy that last completed a leg, and that
@@ -361,9 +385,27 @@ def test_the_watch_trips_when_the_robot_leaves_its_line_beyond_the_widest_before
     watch.start(np.array([0.0, -4.0, 0.0, 0.0]))         # along y; the line is x = 0
     assert watch.check(np.array([0.5, -2.0, 0.0, 0.3])) == '' and not watch.off_line
     assert watch.check(np.array([0.56, -1.0, 0.0, 0.3])) != '' and watch.off_line
-    # a leg no longer than the allowance (holding station) has no line to leave
-    watch.start(np.array([0.1, 0.0, 0.0, 0.0]))
-    assert watch.check(np.array([0.0, 0.9, 0.0, 0.0])) == ''
+
+
+def test_a_leg_too_short_for_a_line_is_watched_as_its_segment():
+    """Holding station (a leg no longer than ``deviation``): the robot may go as far from
+    the leg's segment as the widest D_rob before plus ``deviation``, plus the way its
+    speed at the leg's start covers in ``stop_time``; past the target as well as behind
+    the start. Before, such a leg was not watched for it: an unstable policy drove an
+    80 kg rover 2.3 m from its hold point before D tripped."""
+    watch = DivergenceWatch(distance=2.0, floor=1.0, speed=4.0, horizon=10.0, deviation=0.25,
+                            stop_time=1.0)
+    watch.widest = 0.3
+    watch.start(np.array([0.1, 0.0, 0.0, 0.0]))          # at rest, 0.1 m from its target
+    assert watch.check(np.array([-0.4, 0.0, 0.0, 0.0])) == ''   # 0.5 m past the target
+    reason = watch.check(np.array([-0.6, 0.1, 0.0, 0.0]))       # 0.61 m: D = 0.61 < 2 D0 + 1
+    assert watch.off_line and 'short leg' in reason
+    watch = DivergenceWatch(distance=2.0, floor=1.0, speed=4.0, horizon=10.0, deviation=0.25,
+                            stop_time=1.0)
+    watch.widest = 0.3
+    watch.start(np.array([0.1, 0.0, -0.8, 0.0]))         # told to hold while moving at 0.8 m/s
+    assert watch.check(np.array([-1.2, 0.0, -0.3, 0.0])) == ''   # 1.2 m on: within 1.35
+    assert watch.check(np.array([-1.4, 0.0, -0.2, 0.0])) != '' and watch.off_line
 
 
 def test_the_watch_sees_a_robot_drifting_backwards_along_its_line_past_the_start():
