@@ -204,17 +204,12 @@ class DivergenceWatch:
         if v > self.speed_bound:
             self.tripped = True
             return f'speed {v:.3g} > {self.speed_bound:.3g} (bound from the leg length and T)'
-        if self.short:
-            off = self.distance_from_segment(x)
-            if off > self.line_limit:
-                self.tripped = self.off_line = True
-                return (f'{off:.3g} m from its short leg > {self.widest:.3g} m (the widest '
-                        f'before) + {self.deviation:g} + {self.line_limit - self.widest - self.deviation:.3g}'
-                        f' (its initial speed for {self.stop_time:g} s)')
-            return ''
-        off = self.distance_from_ray(x)
+        off = self.distance_from_segment(x) if self.short else self.distance_from_ray(x)
         if off > self.line_limit:
             self.tripped = self.off_line = True
+            if self.short:
+                return (f'{off:.3g} m from its short leg > {self.line_limit:.3g} m (the widest '
+                        f'before + {self.deviation:g} + its initial speed for {self.stop_time:g} s)')
             return (f'{off:.3g} m off its line (ray) > {self.line_limit - self.deviation:.3g} m '
                     f'(the widest before) + {self.deviation:g}')
         return ''

@@ -147,7 +147,10 @@ class QLearningController(WeightReadout):
                 renew = self._held
             # a leg that a new plan cut short says nothing of the policy: the streak of
             # legs that ran their horizon goes on through it, and ends at a window
-            self._full_legs = self._full_legs + 1 if ran_out else 0 if entered else self._full_legs
+            if ran_out:
+                self._full_legs += 1
+            elif entered:
+                self._full_legs = 0
             c = self.config
             if (self._full_legs >= c.widen_after_legs and c.widen_powers and not self.widened
                     and isinstance(self.critic, LeastSquaresCritic)):

@@ -29,7 +29,6 @@ def test_ray_distance_matches_shapely_and_bounds_d_rob():
     assert ray_distance([2, 2], [2, 2], [5, 6]) == pytest.approx(5.0)         # a point
 
 
-
 def test_segment_distance_matches_shapely():
     """The distance from a leg's segment (a short leg's, holding station) against shapely's."""
     rng = np.random.default_rng(4)
@@ -40,6 +39,7 @@ def test_segment_distance_matches_shapely():
         assert segment_distance(a, b, p) >= ray_distance(a, b, p) - 1e-12
     assert segment_distance([0, 0], [10, 0], [14, -3.0]) == pytest.approx(5.0)  # past the target
     assert segment_distance([2, 2], [2, 2], [5, 6]) == pytest.approx(5.0)       # a point
+
 
 def test_kinodynamic_distance_is_the_distance_to_the_leg_line():
     # Leg from (0, 0) to (10, 0): the deviation is |y|, wherever along the line.
