@@ -134,9 +134,10 @@ def build_graph(scenario: Scenario, speed: float, output: str,
             publishes=(topics.PLANNER_STATS,) + ((topics.GUIDANCE_REFERENCE,) if gvf else ())))
         others.append(NodeSpec(
             'safety', 'rrtq_planner.safety_node', 'SafetyNode',
-            {**sim_time, **world, **dims, **only(run, 'dt', 'lockstep'),
-             **to_parameters(scenario.safety, exclude=('robot_radius',)),
-             **to_parameters(scenario.margins)},
+            # No scenario file: the scenario's obstacles are the truth the robot must not
+            # know; its bounds and robot radius come in the safety settings.
+            {**sim_time, **dims, **only(run, 'dt', 'lockstep'),
+             **to_parameters(scenario.safety), **to_parameters(scenario.margins)},
             subscribes=clock + (topics.ODOM, topics.PERCEPTION_STATUS,
                                 topics.CONTROLLER_STATE),
             publishes=(topics.SAFETY_STATUS,)))
