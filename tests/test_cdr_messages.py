@@ -78,3 +78,21 @@ def test_read_odometry_refuses_big_endian():
     data[1] = 0
     with pytest.raises(ValueError):
         conv.read_odometry(bytes(data))
+
+
+def test_odometry_carries_its_frames_and_the_measurements_variances():
+    """REP-103/105: pose and velocity in ``map``, child ``base_link``; σ_p² and σ_v² on the
+    covariances' x and y diagonal (row-major 6 x 6), every other entry zero; the default, an
+    exact state, has both covariances zero, as before the noise existed."""
+    x = np.array([1.5, -2.0, 0.25, 0.5])
+    msg = conv.odometry_msg(3 * 10**9 + 50_000_000, x, 0.04, 0.0025)
+    assert (msg.header.frame_id, msg.child_frame_id) == ('map', 'base_link')
+    decoded = deserialize_message(serialize_message(msg), Odometry)
+    pose, twist = np.reshape(decoded.pose.covariance, (6, 6)), np.reshape(
+        decoded.twist.covariance, (6, 6))
+    assert np.array_equal(pose, np.diag([0.04, 0.04, 0, 0, 0, 0]))
+    assert np.array_equal(twist, np.diag([0.0025, 0.0025, 0, 0, 0, 0]))
+    assert conv.odometry_state(decoded).tolist() == x.tolist()
+    exact = conv.odometry_msg(0, x)
+    assert not np.any(exact.pose.covariance) and not np.any(exact.twist.covariance)
+    assert serialize_message(exact) == serialize_message(conv.odometry_msg(0, x, 0.0, 0.0))

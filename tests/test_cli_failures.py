@@ -43,6 +43,12 @@ BAD = {
     'bad enum value': (GOOD.replace('model: rover', 'model: tank'), 'plant.model'),
     'negative mass': (GOOD.replace('stiffness: 0.0}', 'stiffness: 0.0, mass: -1}'),
                       'plant.mass'),
+    'actuation delay off the step': (GOOD.replace('stiffness: 0.0}',
+                                                  'stiffness: 0.0, actuation_delay: 0.12}'),
+                                     'plant.actuation_delay'),
+    'negative odometry noise': (GOOD.replace('stiffness: 0.0}', 'stiffness: 0.0, '
+                                             'odometry_noise: {position: -0.01}}'),
+                                'plant.odometry_noise.position'),
     'YAML syntax error': (GOOD.replace('goal: [10.0, 10.0]', 'goal: [10.0, 10.0'), ''),
     'robust without gamma': (GOOD.replace('{variant: open_loop, forces: [[0.0, 5.0, 5.0]]}',
                                           '{variant: robust}'), 'controller.gamma'),

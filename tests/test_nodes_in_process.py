@@ -63,6 +63,60 @@ def test_simulator_lockstep_matches_the_continuous_plant(ros):
     assert np.allclose(conv.odometry_state(odoms[20]), sol.y[:, -1], atol=1e-8)
 
 
+def test_simulator_measures_the_truth_with_noise_and_delays_the_force(ros):
+    """/odom/truth is the continuous plant under the force commanded 3 steps (0.15 s) before,
+    zero until then; /odom is that truth measured by the run seed's noise generator (the
+    same draws, step by step) with its variances in the covariances."""
+    from rrtq_sim.odometry import OdometryNoise, OdometryNoiseConfig, odometry_rng
+    context, executor, _ = ros
+    sigma_p, sigma_v, seed = 0.02, 0.1, 11
+    sim = SimulatorNode(context=context, parameter_overrides=params(
+        A=A.ravel().tolist(), B=B.ravel().tolist(), F=F.ravel().tolist(), dt=0.05, seed=seed,
+        start=[1.0, -2.0], spring_anchor='world_origin', acks=['cmd_force'],
+        wait_for=['/odom:1', '/odom/truth:1'], actuation_delay=0.15, position_std=sigma_p,
+        velocity_std=sigma_v))
+    driver = __import__('rclpy').create_node('driver', context=context)
+    executor.add_node(sim)
+    executor.add_node(driver)
+    force = (30.0, -12.0)
+    cmd_pub = driver.create_publisher(WrenchStamped, '/cmd_force', qos.STREAM)
+    truth = Collector(driver, Odometry, '/odom/truth', qos.STREAM)
+    measured: list[Odometry] = []
+
+    def answer(msg):
+        measured.append(msg)
+        cmd = WrenchStamped()
+        cmd.header.stamp = msg.header.stamp
+        cmd.wrench.force.x, cmd.wrench.force.y = force
+        cmd_pub.publish(cmd)
+    driver.create_subscription(Odometry, '/odom', answer, qos.STREAM)
+    assert spin_until(executor, lambda: len(measured) >= 21 and len(truth) >= 21, 20.0)
+    stamps = [conv.stamp_ns(m.header.stamp) for m in truth.messages[:21]]
+    assert stamps == [conv.stamp_ns(m.header.stamp) for m in measured[:21]]
+    assert stamps == [k * 50_000_000 for k in range(21)]
+    x0 = [1.0, -2.0, 0.0, 0.0]
+    true_x = [conv.odometry_state(m) for m in truth.messages[:21]]
+    free = solve_ivp(lambda t, x: A @ x, (0.0, 0.15), x0, rtol=1e-11, atol=1e-12,
+                     dense_output=True)
+    for k in range(4):                   # the spring alone until the first force acts
+        assert np.allclose(true_x[k], free.sol(0.05 * k), atol=1e-8)
+    pushed = solve_ivp(lambda t, x: A @ x + B @ np.array(force), (0.15, 1.0), free.sol(0.15),
+                       rtol=1e-11, atol=1e-12)
+    assert np.allclose(true_x[20], pushed.y[:, -1], atol=1e-8)
+    noise = OdometryNoise(OdometryNoiseConfig(position_std=sigma_p, velocity_std=sigma_v),
+                          odometry_rng(seed))
+    for t_msg, m_msg in zip(truth.messages[:21], measured[:21]):
+        assert np.array_equal(conv.odometry_state(m_msg),
+                              noise.measure(conv.odometry_state(t_msg)))
+        assert (m_msg.header.frame_id, m_msg.child_frame_id) == ('map', 'base_link')
+        cov_p, cov_v = np.reshape(m_msg.pose.covariance, (6, 6)), np.reshape(
+            m_msg.twist.covariance, (6, 6))
+        assert np.array_equal(cov_p, np.diag([sigma_p ** 2] * 2 + [0.0] * 4))
+        assert np.array_equal(cov_v, np.diag([sigma_v ** 2] * 2 + [0.0] * 4))
+        assert not np.any(t_msg.pose.covariance) and not np.any(t_msg.twist.covariance)
+    assert not np.array_equal(conv.odometry_state(measured[5]), true_x[5])
+
+
 def test_simulator_rejects_non_finite_force(ros):
     context, executor, _ = ros
     sim = SimulatorNode(context=context, parameter_overrides=params(
@@ -109,10 +163,11 @@ obstacles:
     latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
     detected = Collector(driver, ObstacleArray, '/obstacles/detected', latched)
-    odom_pub = driver.create_publisher(Odometry, '/odom', qos.STREAM)
+    # The spawner stands on the simulator's side: it perceives from the true odometry.
+    odom_pub = driver.create_publisher(Odometry, '/odom/truth', qos.STREAM)
     wait_for_messages(executor, detected, 1)
-    assert spin_until(executor, lambda: spawner.count_subscribers('/odom') and
-                      driver.count_subscribers('/odom') >= 1, 10.0)
+    assert spin_until(executor, lambda: spawner.count_subscribers('/odom/truth') and
+                      driver.count_subscribers('/odom/truth') >= 1, 10.0)
     # The robot moves along y = 0 at 1 m/s, one odometry message per second.
     for t in range(0, 41):
         odom_pub.publish(conv.odometry_msg(t * 10**9, np.array([float(t), 0.0, 1.0, 0.0])))
@@ -139,9 +194,10 @@ def test_worst_case_disturbance_is_the_game_saddle_point(ros):
     executor.add_node(node)
     executor.add_node(driver)
     out = Collector(driver, Disturbance, '/disturbance', qos.STREAM)
-    odom_pub = driver.create_publisher(Odometry, '/odom', qos.STREAM)
+    # The worst case plays against the true state (/odom/truth), not the measurement.
+    odom_pub = driver.create_publisher(Odometry, '/odom/truth', qos.STREAM)
     state_pub = driver.create_publisher(ControllerState, '/controller/state', qos.STREAM)
-    assert spin_until(executor, lambda: node.count_publishers('/odom') and
+    assert spin_until(executor, lambda: node.count_publishers('/odom/truth') and
                       node.count_publishers('/controller/state'), 10.0)
     x = np.array([3.0, -1.0, 0.5, 0.2])
     target = np.array([1.0, 1.0])

@@ -20,15 +20,6 @@ from rrtq_common.lockstep import Step
 from rrtq_planner.safety_node import SafetyNode
 
 BOX = [[10.0, 8.0], [14.0, 8.0], [14.0, 11.0], [10.0, 11.0]]
-WORLD = f"""
-name: margins-node
-bounds: {{x: [-5, 40], y: [-10, 15]}}
-start: [0.0, 0.0]
-goal: [35.0, 0.0]
-robot_radius: 0.5
-obstacles:
-  - {{id: box, polygon: {BOX}, known: true}}
-"""
 DT_NS = 50_000_000
 STEPS_PER_LEG = 6
 TRANSIENT = 2.0      # m: the first leg's deviation
@@ -82,14 +73,14 @@ def grown_by(msg):
 
 
 @pytest.fixture
-def node_of(ros, tmp_path):
+def node_of(ros):
     context, _, _ = ros
-    path = tmp_path / 'world.yaml'
-    path.write_text(WORLD)
     made = []
 
     def make(**safety):
-        params = {'scenario': str(path), 'dt': 0.05, 'lockstep': True, **safety}
+        # The scenario's settings, as the graph hands them (the node never reads the file).
+        params = {'robot_radius': 0.5, 'bounds': [-5.0, 40.0, -10.0, 15.0], 'dt': 0.05,
+                  'lockstep': True, **safety}
         node = SafetyNode(context=context, parameter_overrides=[
             Parameter(k, value=v) for k, v in params.items()])
         made.append(node)

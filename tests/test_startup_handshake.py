@@ -96,7 +96,7 @@ def test_the_graph_gives_each_writer_its_readers_and_the_simulator_their_names(t
             readers = [n for n, s in specs.items() if topic in s.subscribes]
             assert count == len(readers) and 'recorder' in readers, (name, topic)
     # Each per-step topic: the simulator's own by matched counts, the others announced.
-    assert set(written) | {topics.CLOCK, topics.ODOM} == set(STEP_TOPICS)
+    assert set(written) | {topics.CLOCK, topics.ODOM, topics.ODOM_TRUTH} == set(STEP_TOPICS)
 
 
 def test_the_nominal_controller_reads_the_disturbance_unless_told_not_to(tmp_path):

@@ -194,8 +194,9 @@ def test_the_foxglove_layout_names_recorded_topics_and_fields(decoded):
         assert topic in decoded, topic
     plotted = [s['value'] for k, p in panels.items() if k.startswith('Plot!')
                for s in p['paths']]
+    # The true clearance is the referee's (simulator side); the safety node's is to the map.
     assert {'/cmd_force.wrench.force.x', '/safety/status.d_rob',
-            '/safety/status.margin'} <= set(plotted)
+            '/safety/status.margin', '/referee/status.min_clearance'} <= set(plotted)
     for value in plotted:
         topic, *path = value.split('.')
         assert isinstance(_field(decoded[topic][-1][1], path), float), value

@@ -7,7 +7,7 @@ settings dataclasses as they are (:func:`rrtq_common.settings.to_parameters`); e
 node declares its parameters from the same dataclasses.
 
 Lock-step chain of one step k (each arrow: "waits for, stamped t_k"):
-spawner (odom) -> safety (perception status, controller state of k-1) -> planner
+spawner (true odometry) -> safety (perception status, controller state of k-1) -> planner
 (safety status) -> controller (planner stats; the safety status, for the keep-off;
 disturbance of k-1 when it learns from it) ->
 disturbance injector (controller state, worst case only) -> simulator (command,
@@ -16,6 +16,11 @@ controller state, disturbance) -> step k+1. Outputs published only on change
 follows them, so a reader knows when to wait for one. With ``planner.guidance.mode: gvf``
 the planner also publishes /guidance/reference every step; the vf_lpc controller waits
 for it (and for the augmented set it names) instead of following the plan.
+
+The simulator publishes the robot's measurement on /odom and the true state on
+/odom/truth: the robot's side (controller, planner, safety) reads /odom only, the
+simulator's side (spawner, injector, supervisor) /odom/truth only. The spawner's
+/referee/status is recorded and read by no node.
 """
 
 from __future__ import annotations
@@ -35,9 +40,11 @@ from rrtq_planner.guidance import GuidanceMode
 from rrtq_sim.disturbance import DisturbanceModel
 from rrtq_sim.simulation import SimulatorConfig
 
-STEP_TOPICS = (topics.CLOCK, topics.ODOM, topics.CMD_FORCE, topics.CONTROLLER_STATE,
-               topics.DISTURBANCE, topics.PERCEPTION_STATUS, topics.SAFETY_STATUS,
-               topics.PLANNER_STATS)
+STEP_TOPICS = (topics.CLOCK, topics.ODOM, topics.ODOM_TRUTH, topics.CMD_FORCE,
+               topics.CONTROLLER_STATE, topics.DISTURBANCE, topics.PERCEPTION_STATUS,
+               topics.REFEREE_STATUS, topics.SAFETY_STATUS, topics.PLANNER_STATS)
+# The per-step topics of the closed loop only (no planner or safety node in open loop).
+LOOP_TOPICS = (topics.SAFETY_STATUS, topics.PLANNER_STATS)
 # What the simulator reads: the inputs it holds (and the acknowledgements of a step).
 SIMULATOR_READS = (topics.CMD_FORCE, topics.CONTROLLER_STATE, topics.DISTURBANCE)
 
@@ -91,20 +98,24 @@ def build_graph(scenario: Scenario, speed: float, output: str,
         'disturbance_injector', 'rrtq_sim.disturbance_node', 'DisturbanceNode',
         {**sim_time, **dims, **only(run, 'seed'), **to_parameters(dist),
          **(to_parameters(worst_case_game(scenario)) if worst_case else {})},
-        subscribes=clock + (topics.ODOM,) + ((topics.CONTROLLER_STATE,) if worst_case else ()),
+        subscribes=clock + (topics.ODOM_TRUTH,)
+        + ((topics.CONTROLLER_STATE,) if worst_case else ()),
         publishes=(topics.DISTURBANCE,))
     spawner = NodeSpec('obstacle_spawner', 'rrtq_sim.spawner_node', 'SpawnerNode',
-                       {**sim_time, **world}, subscribes=clock + (topics.ODOM,),
-                       publishes=(topics.PERCEPTION_STATUS,))
-    published = (STEP_TOPICS if loop else STEP_TOPICS[:6]) + (
+                       {**sim_time, **world}, subscribes=clock + (topics.ODOM_TRUTH,),
+                       publishes=(topics.PERCEPTION_STATUS, topics.REFEREE_STATUS))
+    published = tuple(t for t in STEP_TOPICS if loop or t not in LOOP_TOPICS) + (
         (topics.GUIDANCE_REFERENCE,) if gvf else ())
     recorder = NodeSpec('recorder', 'rrtq_bringup.recorder_node', 'RecorderNode',
                         to_parameters(RecorderConfig(output=output, scenario=scenario.path)),
                         subscribes=published)
     supervisor = NodeSpec('supervisor', 'rrtq_bringup.supervisor', 'SupervisorNode', {},
-                          subscribes=(topics.ODOM, topics.CMD_FORCE, topics.CONTROLLER_STATE)
+                          subscribes=(topics.ODOM_TRUTH, topics.CMD_FORCE,
+                                      topics.CONTROLLER_STATE)
                           + ((topics.PLANNER_STATS,) if loop else ()))
-    # For people only (/tf and markers): outside the lock-step chain, nothing reads it.
+    # For people only (/tf and markers): outside the lock-step chain, nothing reads it. It
+    # draws the robot where its odometry puts it (/tf map -> base_link, as a robot's
+    # localisation would), not the truth.
     viz = NodeSpec('viz', 'rrtq_bringup.viz_node', 'VizNode',
                    to_parameters(VizConfig(robot_radius=scenario.robot_radius,
                                            perception_radius=scenario.perception_radius)),
@@ -123,9 +134,10 @@ def build_graph(scenario: Scenario, speed: float, output: str,
             publishes=(topics.PLANNER_STATS,) + ((topics.GUIDANCE_REFERENCE,) if gvf else ())))
         others.append(NodeSpec(
             'safety', 'rrtq_planner.safety_node', 'SafetyNode',
-            {**sim_time, **world, **dims, **only(run, 'dt', 'lockstep'),
-             **to_parameters(scenario.safety, exclude=('robot_radius',)),
-             **to_parameters(scenario.margins)},
+            # No scenario file: the scenario's obstacles are the truth the robot must not
+            # know; its bounds and robot radius come in the safety settings.
+            {**sim_time, **dims, **only(run, 'dt', 'lockstep'),
+             **to_parameters(scenario.safety), **to_parameters(scenario.margins)},
             subscribes=clock + (topics.ODOM, topics.PERCEPTION_STATUS,
                                 topics.CONTROLLER_STATE),
             publishes=(topics.SAFETY_STATUS,)))
@@ -149,8 +161,9 @@ def build_graph(scenario: Scenario, speed: float, output: str,
                                 wait_for=wait_for, ready_from=tuple(announcing))
     simulator_spec = NodeSpec(
         'simulator', 'rrtq_sim.simulator_node', 'SimulatorNode',
-        {**only(dims, 'n'), **only(run, 'dt'),
+        {**only(dims, 'n'), **only(run, 'dt', 'seed'),
          **to_parameters(plant, exclude=('model', 'mass', 'stiffness', 'damping')),
+         **to_parameters(scenario.odometry_noise),
          'F': to_parameters(dist)['F'], **to_parameters(simulator)},
         subscribes=SIMULATOR_READS)
     return [simulator_spec, *others]

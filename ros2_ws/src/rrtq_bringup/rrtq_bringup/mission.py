@@ -1,7 +1,8 @@
-"""Mission bookkeeping from the robot's odometry (no rclpy): when a run ends, and how it went.
+"""Mission bookkeeping from the robot's true odometry (no rclpy): when a run ends, and how it went.
 
-The monitor judges against the true obstacles of the scenario, not against what any
-node believes: the collision check here is the referee's, not the safety node's.
+The monitor judges the true state (/odom/truth) against the true obstacles and the bounds
+of the scenario (:class:`rrtq_sim.referee.Referee`), not against what any node believes:
+the collision check here is the referee's, not the safety node's.
 """
 
 from __future__ import annotations
@@ -13,9 +14,9 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from rrtq_common.polygon_set import LivePolygons
 from rrtq_common.settings import setting
 from rrtq_common.world import TrueObstacles
+from rrtq_sim.referee import Bounds, Referee
 
 
 class Outcome(enum.StrEnum):
@@ -24,6 +25,7 @@ class Outcome(enum.StrEnum):
     RUNNING = 'running'
     GOAL_REACHED = 'goal_reached'
     COLLISION = 'collision'
+    OUT_OF_BOUNDS = 'out_of_bounds'
     DURATION = 'duration_elapsed'
     NODE_FAILED = 'node_failed'
     INTERRUPTED = 'interrupted'
@@ -36,6 +38,7 @@ class MissionConfig:
     goal: tuple[float, float]      # m
     duration: float                # s of sim time
     robot_radius: float            # m
+    bounds: Bounds                 # m; the robot's centre leaving them ends the run
     dt: float                      # s, plant step (for the effort integral)
     goal_tolerance: float = setting(0.5, unit='m', low=1e-3,
                                     doc='distance to the goal that counts as reached')
@@ -51,12 +54,12 @@ def _percentiles(values: Sequence[float], qs: Sequence[float]) -> dict[str, floa
 
 
 class MissionMonitor:
-    """Feeds on odometry and commands; says when the run is over and summarises it."""
+    """Feeds on the true odometry and the commands; says when the run is over and summarises it."""
 
     def __init__(self, config: MissionConfig, truth: TrueObstacles) -> None:
         self.config = config
         self.truth = truth
-        self.existing_shapes = LivePolygons()
+        self.referee = Referee(config.robot_radius, config.bounds)
         self.outcome = Outcome.RUNNING
         self.reason = ''
         self.t = 0.0
@@ -77,11 +80,10 @@ class MissionMonitor:
 
         Negative when they overlap, also inside an obstacle at robot radius 0.
         """
-        shapes = self.existing_shapes.update(self.truth.update(position, t))
-        return shapes.nearest(position)[0] - self.config.robot_radius
+        return self.referee.clearance(position, self.truth.update(position, t))[0]
 
     def on_odometry(self, t: float, position: np.ndarray) -> Outcome:
-        """Account one odometry sample; returns the (possibly new) outcome."""
+        """Account one sample of the true odometry; returns the (possibly new) outcome."""
         if self.outcome is not Outcome.RUNNING:
             return self.outcome
         if self.position is not None:
@@ -89,13 +91,20 @@ class MissionMonitor:
         self.position = np.asarray(position, dtype=float).copy()
         self.t = t
         self.steps += 1
-        clearance = self.clearance(self.position, t)
+        judged = self.referee.judge(self.position, self.truth.update(self.position, t))
+        clearance = judged.clearance
         self.min_clearance = min(self.min_clearance, clearance)
         goal_dist = float(np.linalg.norm(self.position - np.asarray(self.config.goal)))
         if clearance < 0.0:
             self.collided = True
             self.finish(Outcome.COLLISION, f'collision at t={t:.2f} s, position '
                         f'({position[0]:.2f}, {position[1]:.2f}), {-clearance:.3f} m deep')
+        elif judged.out_of_bounds:
+            (x0, x1), (y0, y1) = self.config.bounds
+            self.finish(Outcome.OUT_OF_BOUNDS, f'out of bounds at t={t:.2f} s, position '
+                        f'({position[0]:.2f}, {position[1]:.2f}), '
+                        f'{-judged.bounds_clearance:.3f} m outside x [{x0:g}, {x1:g}], '
+                        f'y [{y0:g}, {y1:g}]')
         elif goal_dist <= self.config.goal_tolerance and self.time_to_goal is None:
             self.time_to_goal = t
             if self.config.stop_at_goal:

@@ -132,7 +132,7 @@ class Run:
         self.monitor = MissionMonitor(MissionConfig(
             goal=(float(scenario.goal[0]), float(scenario.goal[1])),
             goal_tolerance=scenario.goal_tolerance, duration=scenario.duration,
-            robot_radius=scenario.robot_radius, dt=ctrl.dt,
+            robot_radius=scenario.robot_radius, bounds=scenario.bounds, dt=ctrl.dt,
             stop_at_goal=ctrl.variant is not Variant.OPEN_LOOP),
             TrueObstacles.for_scenario(scenario))
         self.stop_requested: str | None = None

@@ -2,7 +2,8 @@
 
 - ``map.png`` in the manner of RRT-QX Fig. 2: true obstacles (those that vanished
   hatched), the detected and the augmented obstacles, the RRT^X tree and the last path,
-  the traversed path, the perception disc along it, the leg targets;
+  the traversed path (the true one where recorded), the perception disc along it, the leg
+  targets;
 - ``timeseries.png``: forces, speed and distance to goal, disturbance, D_rob and its
   maximum, the learned weights (each panel only when its topics were recorded);
 - ``margins.png`` (the margin against the legs' realised deviations) and, for
@@ -12,7 +13,9 @@
   (:mod:`rrtq_bringup.report_vf_lpc`);
 - with ``--video``, ``run.mp4`` or ``run.gif`` (:mod:`rrtq_bringup.video`);
 - ``summary.json``: path length, control effort, clearance against the true obstacles,
-  time to goal, legs — from the recorded messages and the scenario embedded in the file.
+  time to goal, legs — from the recorded messages and the scenario embedded in the file;
+  the path, clearance and time to goal of the true state (/odom/truth) where recorded,
+  not of the robot's noisy measurement (/odom).
 """
 
 from __future__ import annotations
@@ -42,7 +45,8 @@ from rrtq_common.yaml_reader import field_default  # noqa: E402
 def _existence(data: RunData) -> dict[str, tuple[np.ndarray, float, float]]:
     """Every true obstacle ever published: polygon, first and last time it existed."""
     seen: dict[str, tuple[np.ndarray, float, float]] = {}
-    end = float(data.odom_t[-1]) if data.odom_t.size else 0.0
+    true_t, _ = data.true_state()
+    end = float(true_t[-1]) if true_t.size else 0.0
     sets = data.truth + [(math.inf, [])]
     for (t, obstacles), (t_next, _) in zip(sets, sets[1:]):
         for oid, poly in obstacles:
@@ -52,25 +56,28 @@ def _existence(data: RunData) -> dict[str, tuple[np.ndarray, float, float]]:
 
 
 def true_clearance(data: RunData, robot_radius: float) -> np.ndarray:
-    """Per odometry sample: signed gap (m) from the robot's disc to the nearest true obstacle.
+    """Per true state sample: signed gap (m) from the robot's disc to the nearest true obstacle.
 
-    Negative when they overlap, also inside an obstacle at robot radius 0.
+    Negative when they overlap, also inside an obstacle at robot radius 0. The samples are
+    :meth:`RunData.true_state`'s.
     """
-    out = np.full(data.odom_t.size, math.inf)
+    true_t, true_x = data.true_state()
+    out = np.full(true_t.size, math.inf)
     sets = data.truth + [(math.inf, [])]
     for (t, obstacles), (t_next, _) in zip(sets, sets[1:]):
-        samples = np.flatnonzero((data.odom_t >= t - 1e-9) & (data.odom_t < t_next - 1e-9))
+        samples = np.flatnonzero((true_t >= t - 1e-9) & (true_t < t_next - 1e-9))
         if obstacles and samples.size:
             shapes = PolygonSet([poly for _, poly in obstacles])
-            out[samples] = [shapes.nearest(p)[0] for p in data.odom_x[samples, :2]]
+            out[samples] = [shapes.nearest(p)[0] for p in true_x[samples, :2]]
     return out - robot_radius
 
 
 def summarise(data: RunData, scenario: dict,
               goal_tolerance: float = field_default(MissionConfig, 'goal_tolerance')) -> dict:
-    """The run's summary from its recording."""
+    """The run's summary from its recording (the path, clearance and time to goal: the true state's)."""
     robot_radius = float(scenario.get('robot_radius', 0.0))
-    positions = data.odom_x[:, :2]
+    true_t, true_x = data.true_state()
+    positions = true_x[:, :2]
     clearance = true_clearance(data, robot_radius)
     goal = data.goal if data.goal is not None else np.asarray(scenario.get('goal', [np.nan] * 2))
     reached = np.flatnonzero(np.linalg.norm(positions - goal, axis=1) <= goal_tolerance)
@@ -85,7 +92,7 @@ def summarise(data: RunData, scenario: dict,
         'control_effort': float((data.cmd_u[applied] ** 2).sum() * dt),
         'min_clearance_m': float(clearance.min()) if np.isfinite(clearance).any() else None,
         'collided': collided,
-        'time_to_goal_s': float(data.odom_t[reached[0]]) if reached.size else None,
+        'time_to_goal_s': float(true_t[reached[0]]) if reached.size else None,
         'legs': int(data.leg_index.max()) + 1 if data.leg_index.size else 0,
         'max_d_rob_m': float(data.d_rob_max.max()) if data.d_rob_max.size else None,
         'max_abs_force_n': float(np.abs(data.cmd_u).max()) if data.cmd_u.size else 0.0,
@@ -123,7 +130,7 @@ def plot_map(data: RunData, scenario: dict, path: pathlib.Path) -> None:
     if data.plans:
         plan = data.plans[-1][1]
         ax.plot(plan[:, 0], plan[:, 1], '-', color='tab:green', lw=1.5, label='last RRT^X path')
-    xy = data.odom_x[:, :2]
+    xy = data.true_state()[1][:, :2]
     if xy.size:
         ax.plot(xy[:, 0], xy[:, 1], '-', color='tab:blue', lw=1.8, label='traversed path',
                 zorder=4)

@@ -63,18 +63,32 @@ class RunData:
     policy_events: list[tuple[float, str, str]] = dataclasses.field(default_factory=list)
     """(t, event, reason) of every step the guard of safe learning acted at."""
     states: list[Any] = dataclasses.field(default_factory=list)   # /controller/state, in time
+    true_t: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    true_x: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 4)))
+    """/odom/truth, the simulator's true state (N, 4); empty in a recording made before it
+    existed, whose /odom was the true state."""
+
+    def true_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """(t, x) of the true state: /odom/truth when recorded, else /odom.
+
+        /odom is what the robot measured (with the scenario's odometry noise); a recording
+        without /odom/truth comes from before the noise, when /odom was the true state.
+        """
+        if self.true_t.size:
+            return self.true_t, self.true_x
+        return self.odom_t, self.odom_x
 
 
 # Topics read_run decodes; every other topic is only counted.
 _DECODED = frozenset((
-    '/odom', '/cmd_force', '/disturbance', '/controller/state', '/safety/status',
+    '/odom', '/odom/truth', '/cmd_force', '/disturbance', '/controller/state', '/safety/status',
     '/obstacles/truth', '/obstacles/detected', '/obstacles/augmented', '/plan', '/goal_pose'))
 
 
 def read_run(path: str | pathlib.Path) -> RunData:
     """Decode every message of the topics the report uses (of /planner/tree, the last)."""
     series: dict[str, list] = {k: [] for k in (
-        'odom', 'cmd', 'dist', 'state', 'safety', 'truth', 'detected', 'augmented', 'plan')}
+        'odom', 'true', 'cmd', 'dist', 'state', 'safety', 'truth', 'detected', 'augmented', 'plan')}
     last_tree = None
     goal = None
     topics: dict[str, int] = {}
@@ -92,9 +106,10 @@ def read_run(path: str | pathlib.Path) -> RunData:
             if topic not in _DECODED:
                 continue
             msg = decode(schema, channel, raw)
-            if topic == '/odom':
+            if topic in ('/odom', '/odom/truth'):
                 p, v = msg.pose.pose.position, msg.twist.twist.linear
-                series['odom'].append((_stamp(msg.header), [p.x, p.y, v.x, v.y]))
+                series['odom' if topic == '/odom' else 'true'].append(
+                    (_stamp(msg.header), [p.x, p.y, v.x, v.y]))
             elif topic == '/cmd_force':
                 series['cmd'].append((_stamp(msg.header), [msg.wrench.force.x,
                                                            msg.wrench.force.y]))
@@ -121,6 +136,7 @@ def read_run(path: str | pathlib.Path) -> RunData:
                 np.array([r[1] for r in rows], dtype=float).reshape(len(rows), -1))
 
     odom_t, odom_x = arrays('odom', 4)
+    true_t, true_x = arrays('true', 4)
     cmd_t, cmd_u = arrays('cmd', 2)
     dist_t, dist_d = arrays('dist', 1)
     states = sorted(series['state'], key=lambda m: _stamp(m.header))
@@ -146,7 +162,7 @@ def read_run(path: str | pathlib.Path) -> RunData:
         policy_events=[(_stamp(m.header), e, r) for m in states
                        if getattr(m, 'policy_event', '')
                        for e, r in zip(m.policy_event.split(';'), m.policy_reason.split('; '))],
-        states=states)
+        states=states, true_t=true_t, true_x=true_x)
 
 
 def _tree_segments(msg) -> np.ndarray | None:

@@ -16,7 +16,10 @@ from rrtq_common.executors import NODE_OPTIONS
 
 
 class SupervisorNode(Node):
-    """Feeds the mission monitor from /odom, /cmd_force, /controller/state, /planner/stats."""
+    """Feeds the mission monitor from /odom/truth, /cmd_force, /controller/state, /planner/stats.
+
+    The referee judges the true state, never the robot's measurement (/odom).
+    """
 
     def __init__(self, monitor: MissionMonitor, goal: np.ndarray, **kwargs) -> None:
         super().__init__('supervisor', **NODE_OPTIONS, **kwargs)
@@ -29,8 +32,9 @@ class SupervisorNode(Node):
         self.goal_pub.publish(goal_msg)
         self.pause_pub = self.create_publisher(Empty, topics.SIMULATOR_PAUSE, qos.LATCHED)
         self.last_odom_ns = -1
-        # /odom as bytes, read as the step's nodes read it (rrtq_common.inputs).
-        self.create_subscription(Odometry, topics.ODOM, self.on_odom_bytes, qos.STREAM, raw=True)
+        # The true odometry as bytes, read as the step's nodes read /odom (rrtq_common.inputs).
+        self.create_subscription(Odometry, topics.ODOM_TRUTH, self.on_odom_bytes, qos.STREAM,
+                                 raw=True)
         self.create_subscription(WrenchStamped, topics.CMD_FORCE, self.on_cmd, qos.STREAM)
         self.create_subscription(ControllerState, topics.CONTROLLER_STATE, self.on_state,
                                  qos.STREAM)

@@ -81,6 +81,20 @@ def test_defaults_follow_design_example():
     assert parse(planner={'stall_time': math.inf}).planner.rrtx((0.0, 0.0)).stall_time == math.inf
 
 
+def test_sensing_defaults_are_exact_and_undelayed_and_the_keys_are_read():
+    sc = parse()
+    assert sc.plant.actuation_delay == 0.0
+    assert (sc.odometry_noise.position_std, sc.odometry_noise.velocity_std) == (0.0, 0.0)
+    sc = parse(plant={'actuation_delay': 0.15, 'odometry_noise': {'position': 0.02,
+                                                                  'velocity': 0.1}})
+    assert sc.plant.actuation_delay == 0.15
+    assert (sc.odometry_noise.position_std, sc.odometry_noise.velocity_std) == (0.02, 0.1)
+    lti = {'model': 'lti', 'A': [[0, 1], [0, 0]], 'B': [[0], [1]], 'actuation_delay': 0.3,
+           'odometry_noise': {'velocity': 0.5}}
+    sc = parse(plant=lti, controller={'R': 1.0, 'dt': 0.1})
+    assert sc.plant.actuation_delay == 0.3 and sc.odometry_noise.velocity_std == 0.5
+
+
 def test_seed_override_and_builders():
     sc = load_scenario(DATA / 'full.yaml', seed=11)
     assert sc.seed == 11
@@ -153,6 +167,17 @@ ERRORS = [
     ({'plant': {'model': 'lti', 'A': [[0, 1, 0], [0, 0, 1]], 'B': [[0], [1]]}}, 'plant.A', 'n x n'),
     ({'plant': {'model': 'lti', 'A': [[0, 1], [0, 0]], 'B': [[0], [1], [2]]}}, 'plant.B', 'shape'),
     ({'plant': []}, 'plant', 'mapping'),
+    ({'plant': {'actuation_delay': -0.05}}, 'plant.actuation_delay', '>= 0'),
+    ({'plant': {'actuation_delay': 0.07}}, 'plant.actuation_delay', 'multiple of the step'),
+    ({'plant': {'actuation_delay': 0.1}, 'controller': {'dt': 0.03}}, 'plant.actuation_delay',
+     'dt = 0.03'),
+    ({'plant': {'actuation_delay': '.inf'}}, 'plant.actuation_delay', 'number'),
+    ({'plant': {'odometry_noise': {'position': -0.1}}}, 'plant.odometry_noise.position', '>= 0'),
+    ({'plant': {'odometry_noise': {'velocity': 'some'}}}, 'plant.odometry_noise.velocity',
+     'number'),
+    ({'plant': {'odometry_noise': {'heading': 0.1}}}, 'plant.odometry_noise.heading',
+     'allowed: position, velocity'),
+    ({'plant': {'odometry_noise': 0.1}}, 'plant.odometry_noise', 'mapping'),
     ({'disturbance': {'model': 'gale'}}, 'disturbance.model', 'worst_case'),
     ({'disturbance': {'F': [[1], [2]]}}, 'disturbance.F', 'shape 4x'),
     ({'disturbance': {'model': 'gaussian', 'amplitude': -1}}, 'disturbance.amplitude', '>= 0'),

@@ -39,14 +39,21 @@ def clock_msg(ns: int) -> Clock:
     return Clock(clock=time_msg(ns))
 
 
-def odometry_msg(ns: int, x: np.ndarray) -> Odometry:
+def odometry_msg(ns: int, x: np.ndarray, position_variance: float = 0.0,
+                 velocity_variance: float = 0.0) -> Odometry:
     """Odometry of the planar robot: position and velocity in ``map``.
 
     The robot has no heading state (a point mass), so ``base_link`` is kept parallel
     to ``map`` (identity orientation) and the twist, expressed in ``base_link`` per
-    nav_msgs' convention, equals the velocity in ``map``.
+    nav_msgs' convention, equals the velocity in ``map``. The variances (m², m²/s²) go on
+    the covariances' diagonal for x and y (row-major 6 x 6: entries 0 and 7); the rest of
+    both covariances stays zero.
     """
     msg = Odometry()
+    if position_variance:
+        msg.pose.covariance[0] = msg.pose.covariance[7] = float(position_variance)
+    if velocity_variance:
+        msg.twist.covariance[0] = msg.twist.covariance[7] = float(velocity_variance)
     msg.header.stamp = time_msg(ns)
     msg.header.frame_id = MAP_FRAME
     msg.child_frame_id = ROBOT_FRAME

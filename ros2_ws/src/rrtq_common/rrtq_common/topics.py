@@ -2,6 +2,9 @@
 
 CLOCK = '/clock'
 ODOM = '/odom'
+# The simulator's true state, for the simulator's side (spawner, injector, referee) and the
+# recording: no robot node reads it.
+ODOM_TRUTH = '/odom/truth'
 CMD_FORCE = '/cmd_force'
 DISTURBANCE = '/disturbance'
 GOAL_POSE = '/goal_pose'
@@ -15,6 +18,7 @@ SAFETY_STATUS = '/safety/status'
 DISTURBANCE_ESTIMATE = '/safety/disturbance_estimate'
 PERCEPTION_STATUS = '/perception/status'
 OBSTACLES_TRUTH = '/obstacles/truth'
+REFEREE_STATUS = '/referee/status'
 SIMULATOR_PAUSE = '/simulator/pause'
 GUIDANCE_REFERENCE = '/guidance/reference'
 # The start-up handshake (rrtq_common.readiness): each writer of per-step topics, once connected.

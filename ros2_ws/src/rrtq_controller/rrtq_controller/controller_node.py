@@ -104,8 +104,10 @@ class ControllerNode(Node):
         subscribe_inputs(self, self.gate, (
             Input('odom', Odometry, topics.ODOM, qos.STREAM),
             Input('plan', Path, topics.PLAN, qos.LATCHED),
-            Input('stats', PlannerStats, topics.PLANNER_STATS, qos.STREAM),
-            Input('disturbance', Disturbance, topics.DISTURBANCE, qos.STREAM))
+            Input('stats', PlannerStats, topics.PLANNER_STATS, qos.STREAM))
+            # Only a controller that learns from it hears the injector's disturbance.
+            + ((Input('disturbance', Disturbance, topics.DISTURBANCE, qos.STREAM),)
+               if self.config.reads_disturbance else ())
             + ((Input('safety', SafetyStatus, topics.SAFETY_STATUS, qos.STREAM),)
                if _keeps_off(self.config) else ())
             + ((Input('reference', GuidanceReference, topics.GUIDANCE_REFERENCE, qos.STREAM),

@@ -6,6 +6,10 @@ from the straight line of its current leg (the kinodynamic distance D_rob, eq. 6
 keeps the running maximum, and grows every detected obstacle by that maximum plus the
 robot radius (the Minkowski sum with a disc, eq. 7) so that the planner's straight
 edges keep the curved trajectory clear.
+
+It knows only what the robot knows: its odometry, its map (the detected obstacles) and the
+controller's leg. Clearance and collision here are against that map; the truth is the
+referee's (:mod:`rrtq_sim.referee`), on the simulator's side.
 """
 
 from __future__ import annotations
@@ -21,9 +25,8 @@ from shapely.geometry import Polygon
 
 from rrtq_common.geometry import kinodynamic_distance
 from rrtq_common.lockstep import OnChange
-from rrtq_common.polygon_set import LivePolygons, PolygonSet
+from rrtq_common.polygon_set import PolygonSet
 from rrtq_common.settings import check, setting
-from rrtq_common.world import TrueObstacles
 
 Obstacles = list[tuple[str, np.ndarray]]
 
@@ -112,6 +115,9 @@ class SafetyConfig:
     """Parameters of the safety monitor (the margin is the paper's: the running maximum)."""
 
     robot_radius: float = setting(0.0, unit='m', low=0.0, doc='added to every margin')
+    bounds: tuple[float, float, float, float] | None = setting(
+        None, unit='m', doc="the scenario's bounds x_min x_max y_min y_max (learned_bound "
+        'learns its field on them; None: none given, which learned_bound refuses)')
     growth_threshold: float = setting(0.05, unit='m', low=0.0, doc='the augmented set is '
                                       'republished when the margin has changed (grown, or '
                                       'shrunk under safety.margin conformal or learned_bound) '
@@ -122,6 +128,16 @@ class SafetyConfig:
 
     def __post_init__(self) -> None:
         check(self)
+        if self.bounds is not None and len(self.bounds) != 4:
+            raise ValueError(f'bounds must be x_min x_max y_min y_max, got {self.bounds}')
+
+    @property
+    def region(self) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """The bounds as ((x_min, x_max), (y_min, y_max)), m (None: none given)."""
+        if self.bounds is None:
+            return None
+        x0, x1, y0, y1 = self.bounds
+        return (x0, x1), (y0, y1)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -146,13 +162,15 @@ class SafetyStep:
     d_rob_max: float
     margin: float
     clearance: float
-    """m, from the robot's disc to the nearest true obstacle (< 0: overlap; inf: none)."""
+    """m, from the robot's disc to the nearest *detected* obstacle, where the odometry puts
+    the robot (< 0: overlap; inf: none detected): :attr:`obstacle_distance`."""
     nearest: str
     """Id of that obstacle ('' when there is none)."""
     collision: bool
-    """A collision happened at this step or before (latched)."""
+    """The odometry has put the robot's disc onto a detected obstacle at this step or
+    before (latched)."""
     new_collision: bool
-    """The collision happened at this step."""
+    """It did at this step."""
     leg_index: int
     local_margins: dict[str, float] = dataclasses.field(default_factory=dict)
     """m, robot radius included: each obstacle's own margin when the policy gives one."""
@@ -173,18 +191,15 @@ class SafetyStep:
 
 
 class SafetyMonitor:
-    """Running maximum of D_rob, the margin obstacles are grown by, and the true clearance.
+    """Running maximum of D_rob, the margin obstacles are grown by, the clearance to the map.
 
     Parameters
     ----------
     config : SafetyConfig
-    truth : TrueObstacles, optional
-        What physically exists (for the clearance and the collision flag of :meth:`step`).
     """
 
-    def __init__(self, config: SafetyConfig, truth: TrueObstacles | None = None) -> None:
+    def __init__(self, config: SafetyConfig) -> None:
         self.config = config
-        self.truth = truth
         self.d_rob = 0.0
         self.d_rob_max = 0.0
         self.published_margin: float | None = None
@@ -198,7 +213,6 @@ class SafetyMonitor:
         where its disc meets the obstacle."""
         self._published = PolygonSet([])
         self._augmented_stamp = 0
-        self._existing = LivePolygons()
         self._policy_margin: float | None = None
         self._local: Callable[[str, np.ndarray], float] | None = None
         self._published_local: dict[str, float] = {}
@@ -250,7 +264,7 @@ class SafetyMonitor:
         With the robot's ``position``, an obstacle is grown at most to ``KEEP_OUT`` short of
         the robot: a margin that grew while the robot was near an obstacle must not swallow
         the robot, or the planner, which plans from the robot's position, finds no way out.
-        (Inside the true obstacle grown by the robot radius is a collision, not this case.)
+        (Inside the detected obstacle grown by the robot radius is a collision, not this case.)
         """
         self.published_margin = self.margin
         self._published_local = self._local_margins(obstacles)
@@ -287,7 +301,7 @@ class SafetyMonitor:
 
         Measure D_rob on the current leg; republish the augmented set when the margin has
         grown, the detected set changed or a grown obstacle would swallow the robot;
-        check the true clearance.
+        measure the clearance to the detected obstacles.
 
         Parameters
         ----------
@@ -333,20 +347,16 @@ class SafetyMonitor:
             self._augmented_stamp = stamp_ns
             augmented = self.augmented(self._detected, p)
             self._published = PolygonSet([poly for _, poly in augmented])
-        gap, nearest = math.inf, ''
-        if self.truth is not None:
-            existing = self.truth.update(p, stamp_ns * 1e-9)
-            gap, index = clearance(p, self._existing.update(existing), self.config.robot_radius)
-            nearest = existing[index].id if index >= 0 else ''
-        new_collision = gap < 0.0 and not self.collided
+        near, direction, index = _nearest(p, self._detected_set, self._detected_rings,
+                                          self.config.robot_radius)
+        nearest = self._detected[index][0] if index >= 0 else ''
+        new_collision = near < 0.0 and not self.collided
         self.collided = self.collided or new_collision
-        near, direction = nearest_obstacle(p, self._detected_set, self._detected_rings,
-                                           self.config.robot_radius)
         ahead, normal = (math.inf, (0.0, 0.0)) if velocity is None else obstacle_ahead(
             p, velocity, self._swept, self.config.look_ahead)
         return SafetyStep(
             augmented=augmented, augmented_stamp_ns=self._augmented_stamp, d_rob=self.d_rob,
-            d_rob_max=self.d_rob_max, margin=self.margin, clearance=float(gap),
+            d_rob_max=self.d_rob_max, margin=self.margin, clearance=float(near),
             nearest=nearest, collision=self.collided, new_collision=new_collision,
             leg_index=leg.index if leg is not None and leg.d0 > 0.0 else 0,
             local_margins=dict(self._published_local), obstacle_distance=near,
@@ -394,15 +404,22 @@ def nearest_obstacle(position: npt.ArrayLike, polygons: PolygonSet,
     The direction points from the polygon's nearest boundary point to the robot's centre
     (away from the obstacle); (0, 0) when there is no polygon or the centre is inside one.
     """
+    distance, direction, _ = _nearest(position, polygons, rings, robot_radius)
+    return distance, direction
+
+
+def _nearest(position: npt.ArrayLike, polygons: PolygonSet, rings: Sequence[np.ndarray],
+             robot_radius: float) -> tuple[float, tuple[float, float], int]:
+    """:func:`nearest_obstacle`, and the index of that polygon (-1: none)."""
     p = np.asarray(position, dtype=float)[:2]
     value, index = polygons.nearest(p)
     if index < 0:
-        return math.inf, (0.0, 0.0)
+        return math.inf, (0.0, 0.0), -1
     if value <= 0.0:
-        return value - robot_radius, (0.0, 0.0)
+        return value - robot_radius, (0.0, 0.0), index
     ring = shapely.LinearRing(rings[index])
     closest = ring.interpolate(ring.project(shapely.Point(p)))
     away = p - np.array([closest.x, closest.y])
     norm = float(np.hypot(*away))
     direction = (0.0, 0.0) if norm < 1e-12 else (float(away[0] / norm), float(away[1] / norm))
-    return value - robot_radius, direction
+    return value - robot_radius, direction, index

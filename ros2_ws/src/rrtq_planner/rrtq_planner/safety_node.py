@@ -1,4 +1,4 @@
-"""Safety node: kinodynamic margin, augmented obstacles, true clearance (RRT-QX §2, §5).
+"""Safety node: kinodynamic margin, augmented obstacles, clearance to the map (RRT-QX §2, §5).
 
 Each step: D_rob of the robot from its current leg (from the controller's state of the
 step before) and the margin of the scenario's ``safety.margin`` policy
@@ -7,9 +7,14 @@ learned bound, ``docs/margins.md``); when that margin has moved by the growth th
 or down, or the detected set changed, every detected obstacle grown by margin + robot
 radius is published on /obstacles/augmented (latched) so that the planner repairs its graph
 (:meth:`rrtq_planner.safety.SafetyMonitor.step`). A leg whose deviation exceeds the margin
-in force for it is logged and counted. The node also watches the clearance to the true
-obstacles of the scenario and flags a collision the moment it happens; /safety/status goes
-out every step.
+in force for it is logged and counted. The node also reports the clearance of the robot's
+disc to the nearest detected obstacle and flags the step its odometry puts the disc onto
+one; /safety/status goes out every step.
+
+It stands on the robot's side: it reads /odom, the perception (/obstacles/detected,
+/perception/status), /controller/state and its settings (the scenario's bounds and robot
+radius among them), never the scenario file, whose obstacles are the truth. The true
+clearance and collision are the referee's (/referee/status, :mod:`rrtq_sim.referee`).
 """
 
 from __future__ import annotations
@@ -28,8 +33,6 @@ from rrtq_common.inputs import Input, subscribe_inputs
 from rrtq_common.lockstep import Requirement, Step, StepGate, seconds_to_ns
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
-from rrtq_common.world import TrueObstacles
-from rrtq_common.world_yaml import WorldSource, load_world
 from rrtq_planner.conversions import (disturbance_estimate_msg, leg_of, margin_sample,
                                      safety_status_msg)
 from rrtq_planner.margins.build import MarginConfig, make_policy
@@ -44,19 +47,19 @@ class SafetyNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('safety', **NODE_OPTIONS, **kwargs)
-        world = load_world(declare_config(self, WorldSource).scenario)
         run = declare_config(self, RunConfig, exclude=('seed',))
         self.dims = declare_config(self, Dimensions)
-        config = declare_config(self, SafetyConfig, robot_radius=world.robot_radius)
+        config = declare_config(self, SafetyConfig)
         margins = declare_config(self, MarginConfig)
         calibration = read_calibration(margins.calibration).scores if margins.calibration else ()
-        self.policy = make_policy(
-            margins.margin, region=world.bounds, dt=run.dt, confidence=margins.confidence,
-            window=margins.window, initial_margin=margins.initial_margin,
-            calibration=calibration, frame=margins.frame, n=self.dims.n, m=self.dims.m,
-            prior_bound=margins.prior_bound, robot_radius=world.robot_radius)
         self.needs_gain = margins.margin is MarginMode.LEARNED_BOUND
-        self.monitor = SafetyMonitor(config, TrueObstacles.for_scenario(world))
+        self.policy = make_policy(
+            margins.margin, region=config.region, dt=run.dt,
+            confidence=margins.confidence, window=margins.window,
+            initial_margin=margins.initial_margin, calibration=calibration,
+            frame=margins.frame, n=self.dims.n, m=self.dims.m,
+            prior_bound=margins.prior_bound, robot_radius=config.robot_radius)
+        self.monitor = SafetyMonitor(config)
         self.aug_pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_AUGMENTED,
                                              qos.LATCHED)
         self.status_pub = self.create_publisher(SafetyStatus, topics.SAFETY_STATUS, qos.STREAM)
@@ -101,8 +104,9 @@ class SafetyNode(Node):
             self.aug_pub.publish(conv.obstacle_array_msg(step.stamp_ns, done.augmented,
                                                          done.margin, done.local_margins))
         if done.new_collision:
-            self.get_logger().error(f'collision with {done.nearest} at t={step.stamp_ns * 1e-9:.2f}'
-                                    f' s, ({x[0]:.2f}, {x[1]:.2f})')
+            self.get_logger().error(f'the odometry puts the robot onto detected obstacle '
+                                    f'{done.nearest} at t={step.stamp_ns * 1e-9:.2f} s, '
+                                    f'({x[0]:.2f}, {x[1]:.2f})')
         status = safety_status_msg(odom.header, done, margin)
         self.gate.answered(step.stamp_ns, status)
         self.status_pub.publish(status)

@@ -208,3 +208,35 @@ def test_a_growing_map_grows_only_its_new_obstacles_and_publishes_what_growing_a
     assert monitor.grown == 38                          # (the robot radius's: reused)
     assert all(np.array_equal(ring, grow_polygon(box, 1.4))
                for (_, ring), (_, box) in zip(out.augmented, moved, strict=True))
+
+
+def test_clearance_and_collision_are_against_the_robots_map_not_the_truth():
+    """The monitor is built from its settings alone (no truth): the clearance, the nearest
+    obstacle and the collision flag of a step are those of the detected obstacles where the
+    odometry puts the robot, against shapely's distances. An obstacle the robot has not
+    detected does not count; one it believes in does."""
+    import inspect
+
+    from rrtq_common.lockstep import OnChange
+    assert list(inspect.signature(SafetyMonitor).parameters) == ['config']
+    monitor = SafetyMonitor(SafetyConfig(robot_radius=0.3))
+    nothing = monitor.step(0, [5.0, 5.0], OnChange(1, lambda: []), None)
+    assert math.isinf(nothing.clearance) and nothing.nearest == '' and not nothing.collision
+    far_box = SQUARE + [10.0, 0.0]
+    believed = [('near', SQUARE), ('far', far_box)]
+    rng = np.random.default_rng(9)
+    for k, p in enumerate(rng.uniform(-3.0, 13.0, (30, 2))):
+        gaps = [shapely.Polygon(poly).distance(shapely.Point(p)) for _, poly in believed]
+        if min(gaps) <= 0.3:
+            continue
+        step = monitor.step(k + 1, p, OnChange(2, lambda: believed), None)
+        assert step.clearance == pytest.approx(min(gaps) - 0.3, abs=1e-9)
+        assert step.clearance == step.obstacle_distance
+        assert step.nearest == believed[int(np.argmin(gaps))][0]
+        assert not step.collision
+    # The odometry puts the disc onto the believed square: a collision, latched.
+    onto = monitor.step(100, [-0.1, 0.5], OnChange(2, lambda: believed), None)
+    assert onto.collision and onto.new_collision and onto.nearest == 'near'
+    assert onto.clearance == pytest.approx(-0.2)
+    later = monitor.step(101, [-5.0, 0.5], OnChange(2, lambda: believed), None)
+    assert later.collision and not later.new_collision

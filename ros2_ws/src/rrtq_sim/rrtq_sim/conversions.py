@@ -1,13 +1,14 @@
-"""Messages <-> core types of the simulator side: the disturbance, the perception status."""
+"""Messages <-> core types of the simulator side: the disturbance, the perception and referee statuses."""
 
 from __future__ import annotations
 
 import numpy as np
 from std_msgs.msg import Header
-from rrtq_msgs.msg import Disturbance, PerceptionStatus
+from rrtq_msgs.msg import Disturbance, PerceptionStatus, RefereeStatus
 
 from rrtq_common.conversions import MAP_FRAME, time_msg
 from rrtq_sim.perception import ObstacleEvent, Observation
+from rrtq_sim.referee import Judgement
 
 
 def disturbance_msg(ns: int, model: str, value: np.ndarray) -> Disturbance:
@@ -26,3 +27,11 @@ def perception_status_msg(header: Header, detected_stamp_ns: int, known: int,
         in_range=seen.in_range,
         detected=[oid for e, oid in seen.events if e is ObstacleEvent.DETECTED],
         removed=[oid for e, oid in seen.events if e is ObstacleEvent.REMOVED])
+
+
+def referee_status_msg(header: Header, judgement: Judgement) -> RefereeStatus:
+    """The referee's judgement of the step of ``header`` (the true odometry's)."""
+    return RefereeStatus(
+        header=header, min_clearance=judgement.clearance, nearest_obstacle=judgement.nearest,
+        collision=judgement.collision, out_of_bounds=judgement.out_of_bounds,
+        bounds_clearance=judgement.bounds_clearance)

@@ -1,8 +1,9 @@
 """Disturbance injector: publishes d(t) on /disturbance, one value per plant step.
 
-Lives on the simulator's side of the graph, so it may know the plant: the
-``worst_case`` model plays the zero-sum game's maximising player d* = γ⁻²FᵀP(τ)x̄,
-with P the game Riccati solution of the controller's current leg
+Lives on the simulator's side of the graph, so it may know the plant, and it reads the
+true state (/odom/truth: the ``field`` model's position, the worst case's x̄), never the
+robot's measurement. The ``worst_case`` model plays the zero-sum game's maximising player
+d* = γ⁻²FᵀP(τ)x̄, with P the game Riccati solution of the controller's current leg
 (:class:`rrtq_sim.disturbance.WorstCaseGame`).
 """
 
@@ -28,7 +29,7 @@ from rrtq_sim.disturbance import (DisturbanceConfig, DisturbanceModel, WorstCase
 
 
 class DisturbanceNode(Node):
-    """d(t) for every /odom step (joined with /controller/state for worst_case)."""
+    """d(t) for every /odom/truth step (joined with /controller/state for worst_case)."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('disturbance_injector', **NODE_OPTIONS, **kwargs)
@@ -42,7 +43,8 @@ class DisturbanceNode(Node):
         # The worst case needs the controller's leg of the same step, in either mode.
         self.gate = StepGate([Requirement('state')] if worst else [], lockstep=True,
                              ordered=False, resend=self.pub.publish, on_step=self.publish)
-        subscribe_inputs(self, self.gate, [Input('odom', Odometry, topics.ODOM, qos.STREAM)] + (
+        subscribe_inputs(self, self.gate, [Input('odom', Odometry, topics.ODOM_TRUTH,
+                                                 qos.STREAM)] + (
             [Input('state', ControllerState, topics.CONTROLLER_STATE, qos.STREAM)] if worst
             else []))
 

@@ -52,6 +52,8 @@ class PlantConfig:
                                           doc='where x_bar is measured from')
     force_limit: float = setting(1000.0, unit='N', low=0.0, low_open=True,
                                  doc='saturation per axis (inf: none)')
+    actuation_delay: float = setting(0.0, unit='s', low=0.0, doc='the force commanded at a '
+                                     'step acts this much later (a multiple of the step)')
 
     def __post_init__(self) -> None:
         check(self)

@@ -1,11 +1,13 @@
 """The simulated robot: the plant's state, stepped with the held force and disturbance.
 
 What the simulator node runs (no rclpy): the inputs it holds over a step, the spring
-anchor, and the rule that nothing non-finite or misshapen ever reaches the plant.
+anchor, the actuator's delay (:class:`DelayLine`), and the rule that nothing non-finite or
+misshapen ever reaches the plant.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,7 +17,7 @@ from rrtq_common.lockstep import seconds_to_ns
 from rrtq_common.settings import check, setting
 from rrtq_sim.plant import Plant, SpringAnchor
 
-__all__ = ['SimulatorConfig', 'Simulation']
+__all__ = ['SimulatorConfig', 'Simulation', 'DelayLine', 'delay_steps']
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -47,6 +49,52 @@ class SimulatorConfig:
         check(self)
 
 
+def delay_steps(delay: float, dt: float) -> int:
+    """The actuation delay ``delay`` (s) in steps of ``dt`` (s).
+
+    Raises
+    ------
+    ValueError
+        When ``delay`` is negative, not finite or not a whole multiple of ``dt``.
+    """
+    if not (np.isfinite(delay) and delay >= 0.0):
+        raise ValueError(f'must be finite and >= 0, got {delay}')
+    steps = delay / dt
+    whole = round(steps)
+    if abs(steps - whole) > 1e-9 * max(1.0, steps):
+        raise ValueError(f'must be a whole multiple of the step dt = {dt:g} s, got {delay:g} s '
+                         f'({steps:.4g} steps)')
+    return int(whole)
+
+
+class DelayLine:
+    """The actuator's delay: a first-in, first-out line of ``steps`` forces.
+
+    What is pushed at step k comes out at step k + ``steps``; zeros come out before (no
+    force before the first command).
+
+    Parameters
+    ----------
+    steps : int
+        The delay in steps (>= 0; 0: a force comes out at the step it is pushed).
+    m : int
+        Force dimension.
+    """
+
+    def __init__(self, steps: int, m: int) -> None:
+        if steps < 0:
+            raise ValueError(f'steps must be >= 0, got {steps}')
+        self.steps = int(steps)
+        self._line: deque[np.ndarray] = deque(np.zeros(m) for _ in range(self.steps))
+
+    def shift(self, u: np.ndarray) -> np.ndarray:
+        """Push the force commanded at this step; return the one that acts over it."""
+        if not self.steps:
+            return u
+        self._line.append(np.array(u, dtype=float))
+        return self._line.popleft()
+
+
 class Simulation:
     """The full state x (world frame) of ``plant``, one exact zero-order-hold step at a time.
 
@@ -59,10 +107,13 @@ class Simulation:
         ``leg_target``: the spring follows the controller's target; else the origin.
     duration : float
         Sim time after which no step is taken, s (0: never).
+    delay : int
+        The actuator's delay in steps: the force held at step k acts over step k + delay
+        (the spring's anchor is not delayed).
     """
 
     def __init__(self, plant: Plant, start: npt.ArrayLike, anchor: SpringAnchor,
-                 duration: float) -> None:
+                 duration: float, delay: int = 0) -> None:
         self.plant = plant
         self.anchor_mode = anchor
         self.dt_ns = seconds_to_ns(plant.dt)
@@ -72,6 +123,7 @@ class Simulation:
         self.x[:2] = np.asarray(start, dtype=float)[:2]
         self.anchor = np.array(self.x[:2])
         self.u = np.zeros(plant.m)
+        self.delay = DelayLine(delay, plant.m)
         self.d = np.zeros(plant.q)
         self.rejected = 0
         self.paused = False
@@ -112,10 +164,13 @@ class Simulation:
             self.anchor = np.asarray(target, dtype=float)
 
     def advance(self) -> bool:
-        """One step with the held force and disturbance; False when paused or finished."""
+        """One step with the held disturbance and the force held ``delay`` steps ago.
+
+        False when paused or finished.
+        """
         if self.paused or self.finished:
             return False
         anchor = self.anchor if self.anchor_mode is SpringAnchor.LEG_TARGET else np.zeros(2)
-        self.x = self.plant.step(self.x, self.u, self.d, anchor)
+        self.x = self.plant.step(self.x, self.delay.shift(self.u), self.d, anchor)
         self.step_index += 1
         return True

@@ -1,4 +1,9 @@
-"""Simulator node: owns /clock, steps the plant, publishes /odom every step.
+"""Simulator node: owns /clock, steps the plant, publishes /odom and /odom/truth every step.
+
+/odom is what the robot measures (the true state with the scenario's odometry noise, its
+covariance filled in: :mod:`rrtq_sim.odometry`); /odom/truth is the true state, for the
+simulator's side and the recording. A commanded force acts ``plant.actuation_delay``
+later (:class:`rrtq_sim.simulation.DelayLine`).
 
 Lock-step (``speed`` = 0, the CLI's ``--speed max``): step k+1 is taken only when every
 topic in ``acks`` has delivered its message stamped with step k's time, so a run is a
@@ -26,8 +31,9 @@ from rrtq_common.lockstep import Requirement, Step, StepGate
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
 from rrtq_sim.disturbance import DisturbanceConfig
+from rrtq_sim.odometry import OdometryNoise, OdometryNoiseConfig, odometry_rng
 from rrtq_sim.plant import Plant, PlantConfig
-from rrtq_sim.simulation import Simulation, SimulatorConfig
+from rrtq_sim.simulation import Simulation, SimulatorConfig, delay_steps
 
 ACK_TOPICS = {'cmd_force': (topics.CMD_FORCE, WrenchStamped),
               'controller_state': (topics.CONTROLLER_STATE, ControllerState),
@@ -43,19 +49,24 @@ class SimulatorNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__('simulator', **NODE_OPTIONS, **kwargs)
         dims = declare_config(self, Dimensions, exclude=('m', 'q'))
-        run = declare_config(self, RunConfig, exclude=('lockstep', 'seed'))
+        run = declare_config(self, RunConfig, exclude=('lockstep',))
         plant = declare_config(self, PlantConfig, dims,
                                exclude=('model', 'mass', 'stiffness', 'damping'))
         disturbance = declare_config(self, DisturbanceConfig, dims,
                                      exclude=('model', 'amplitude', 'frequency', 'gamma'))
         self.config = declare_config(self, SimulatorConfig)
         self.sim = Simulation(Plant(plant.A, plant.B, disturbance.F, run.dt, plant.force_limit),
-                              self.config.start, plant.spring_anchor, self.config.duration)
+                              self.config.start, plant.spring_anchor, self.config.duration,
+                              delay_steps(plant.actuation_delay, run.dt))
+        self.noise = OdometryNoise(declare_config(self, OdometryNoiseConfig),
+                                   odometry_rng(run.seed))
+        self._last_odometry: tuple[Odometry, Odometry] | None = None
         self.started = False
         self.wall_start: float | None = None
         self._last_publish = time.monotonic()
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK, qos.CLOCK)
         self.odom_pub = self.create_publisher(Odometry, topics.ODOM, qos.STREAM)
+        self.truth_pub = self.create_publisher(Odometry, topics.ODOM_TRUTH, qos.STREAM)
         self.gate = StepGate([Requirement(key) for key in self.config.acks],
                              lockstep=self.config.speed == 0.0, driver=None, ordered=False,
                              on_step=self._on_step)
@@ -109,7 +120,8 @@ class SimulatorNode(Node):
         for topic, count in self._wait_for.items():
             # Own publishers: readers actually matched to them (the graph's counts can run
             # ahead of endpoint matching). Other topics: what discovery reports.
-            own = {topics.ODOM: self.odom_pub, topics.CLOCK: self.clock_pub}.get(topic)
+            own = {topics.ODOM: self.odom_pub, topics.ODOM_TRUTH: self.truth_pub,
+                   topics.CLOCK: self.clock_pub}.get(topic)
             seen = own.get_subscription_count() if own else self.count_subscribers(topic)
             if seen < count:
                 return False
@@ -147,8 +159,21 @@ class SimulatorNode(Node):
             self.publish_state()
 
     def publish_state(self) -> None:
-        self.clock_pub.publish(conv.clock_msg(self.sim.now_ns))
-        self.odom_pub.publish(conv.odometry_msg(self.sim.now_ns, self.sim.x))
+        now = self.sim.now_ns
+        truth = conv.odometry_msg(now, self.sim.x)
+        # One measurement per step (a resend repeats it), so a run's noise is its seed's.
+        measured = truth if self.noise.exact else conv.odometry_msg(
+            now, self.noise.measure(self.sim.x), self.noise.position_variance,
+            self.noise.velocity_variance)
+        self._last_odometry = truth, measured
+        self.clock_pub.publish(conv.clock_msg(now))
+        self._publish_odometry()
+
+    def _publish_odometry(self) -> None:
+        assert self._last_odometry is not None
+        truth, measured = self._last_odometry
+        self.truth_pub.publish(truth)
+        self.odom_pub.publish(measured)
         self._last_publish = time.monotonic()
 
     def _resend_if_stalled(self) -> None:
@@ -158,8 +183,7 @@ class SimulatorNode(Node):
         self.get_logger().warning(
             f'step {self.sim.step_index}: no acknowledgement from {missing} for '
             f'{self.config.resend_period_s:.1f} s; republishing odometry')
-        self.odom_pub.publish(conv.odometry_msg(self.sim.now_ns, self.sim.x))
-        self._last_publish = time.monotonic()
+        self._publish_odometry()
 
 
 def main(args: list[str] | None = None) -> None:

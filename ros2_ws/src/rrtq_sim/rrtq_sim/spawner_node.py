@@ -1,15 +1,18 @@
-"""Obstacle spawner: the true world's obstacles, and what the robot perceives of them.
+"""Obstacle spawner: the true world's obstacles, what the robot perceives of them, the referee.
 
-On every /odom step the perception core compares truth with the robot's map inside
-the perception disc; whenever the map changes, the whole known set is published on
-/obstacles/detected (latched, so late joiners get the current map). Every step ends
+On every step of the true odometry (/odom/truth: the spawner stands on the simulator's
+side) the perception core compares truth with the robot's map inside the perception
+disc; whenever the map changes, the whole known set is published on /obstacles/detected
+(latched, so late joiners get the current map). Every step ends
 with /perception/status, which names the stamp of the latest map: a lock-step reader
 that sees it equal to the step's stamp knows to wait for that map.
 
 The ground truth (the obstacles that physically exist) goes on /obstacles/truth, latched,
 whenever it changes: no node of the robot reads it; it is there so that a recording
 can be judged and plotted against the truth alone. An obstacle due to appear near the
-robot is held back until the robot is clear of it (``TrueObstacles``).
+robot is held back until the robot is clear of it (``TrueObstacles``). Every step also
+ends with /referee/status: the robot's true clearance to what exists and to the bounds
+(:class:`rrtq_sim.referee.Referee`), for the recording; no robot node reads it either.
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ from typing import Any
 
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rrtq_msgs.msg import ObstacleArray, PerceptionStatus
+from rrtq_msgs.msg import ObstacleArray, PerceptionStatus, RefereeStatus
 
 from rrtq_common import conversions as conv
 from rrtq_common import qos, topics
@@ -29,8 +32,9 @@ from rrtq_common.lockstep import Step, StepGate
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.world import ObstacleSpec, TrueObstacles
 from rrtq_common.world_yaml import WorldSource, load_world
-from rrtq_sim.conversions import perception_status_msg
+from rrtq_sim.conversions import perception_status_msg, referee_status_msg
 from rrtq_sim.perception import Observation, Perception
+from rrtq_sim.referee import Referee
 
 
 class SpawnerNode(Node):
@@ -41,25 +45,32 @@ class SpawnerNode(Node):
         world = load_world(declare_config(self, WorldSource).scenario)
         self.perception = Perception(world.obstacles, world.perception_radius,
                                      TrueObstacles.for_scenario(world))
+        self.referee = Referee(world.robot_radius, world.bounds)
         self.pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_DETECTED, qos.LATCHED)
         self.status_pub = self.create_publisher(PerceptionStatus, topics.PERCEPTION_STATUS,
                                                 qos.STREAM)
         self.truth_pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_TRUTH,
                                                qos.LATCHED)
+        self.referee_pub = self.create_publisher(RefereeStatus, topics.REFEREE_STATUS,
+                                                 qos.STREAM)
         self.gate = StepGate([], lockstep=True, ordered=False, resend=self.status_pub.publish,
                              on_step=self.on_odom)
         self.detected_stamp = 0
-        subscribe_inputs(self, self.gate, [Input('odom', Odometry, topics.ODOM, qos.STREAM)])
+        subscribe_inputs(self, self.gate, [Input('odom', Odometry, topics.ODOM_TRUTH,
+                                                 qos.STREAM)])
         self.publish_map(0)
         self.publish_truth(0, self.perception.take_truth_change())
 
     def on_odom(self, step: Step) -> None:
         odom = step['odom']
-        seen = self.perception.observe(conv.odometry_state(odom)[:2], step.stamp_ns * 1e-9)
+        position = conv.odometry_state(odom)[:2]
+        seen = self.perception.observe(position, step.stamp_ns * 1e-9)
         self._log(step.stamp_ns * 1e-9, seen)
         if seen.events:
             self.publish_map(step.stamp_ns)
         self.publish_truth(step.stamp_ns, seen.truth)
+        self.referee_pub.publish(referee_status_msg(
+            odom.header, self.referee.judge(position, self.perception.truth.existing)))
         status = perception_status_msg(odom.header, self.detected_stamp,
                                        len(self.perception.known_ids), seen)
         self.gate.answered(step.stamp_ns, status)

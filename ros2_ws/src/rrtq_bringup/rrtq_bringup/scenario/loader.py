@@ -14,8 +14,9 @@ from typing import Any
 import numpy as np
 
 from rrtq_bringup.scenario.schema import Scenario
-from rrtq_bringup.scenario.sections import (read_controller, read_disturbance, read_planner,
-                                            read_plant, read_safety)
+from rrtq_bringup.scenario.sections import (read_controller, read_disturbance,
+                                            read_odometry_noise, read_planner, read_plant,
+                                            read_safety)
 from rrtq_bringup.scenario.vf_lpc import read_guidance, read_vf_lpc
 from rrtq_common.world import World
 from rrtq_common.world_yaml import read_world
@@ -25,6 +26,7 @@ from rrtq_sim.disturbance import (DisturbanceGenerator, DisturbanceModel, WorstC
                                   make_generator)
 from rrtq_sim.plant import Plant, PlantConfig
 from rrtq_sim.riccati import RiccatiEscape, RiccatiSolution, game_gamma_bound, solve_riccati
+from rrtq_sim.simulation import delay_steps
 
 __all__ = ['parse_scenario', 'load_scenario', 'build_plant', 'worst_case_game',
            'game_riccati', 'build_disturbance']
@@ -76,10 +78,15 @@ def parse_scenario(data: Any, path: str) -> Scenario:
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise r.error('seed', f'expected an integer >= 0, got {seed!r}')
     plant = read_plant(r, data.get('plant'))
+    odometry_noise = read_odometry_noise(r, data.get('plant'))
     ctrl_raw = data.get('controller')
     robust = isinstance(ctrl_raw, Mapping) and ctrl_raw.get('variant') == Variant.ROBUST
     disturbance = read_disturbance(r, data.get('disturbance'), plant.n, robust)
     controller = read_controller(r, ctrl_raw, plant, world)
+    try:
+        delay_steps(plant.actuation_delay, controller.dt)
+    except ValueError as exc:
+        raise r.error('plant.actuation_delay', str(exc)) from None
     planner, safety, goal_tolerance = read_planner(r, data.get('planner'), world)
     margins = read_safety(r, data.get('safety'), os.path.dirname(os.path.abspath(path)), plant)
     planner_raw = data.get('planner')
@@ -98,7 +105,7 @@ def parse_scenario(data: Any, path: str) -> Scenario:
                     duration=r.setting(data, 'duration', Scenario), plant=plant,
                     disturbance=disturbance, controller=controller, planner=planner,
                     safety=safety, margins=margins, goal_tolerance=goal_tolerance, guidance=guidance,
-                    lpc=lpc, **world_fields)
+                    lpc=lpc, odometry_noise=odometry_noise, **world_fields)
 
 
 def load_scenario(path: str | os.PathLike[str], seed: int | None = None) -> Scenario:

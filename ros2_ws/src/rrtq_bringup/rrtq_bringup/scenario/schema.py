@@ -2,7 +2,8 @@
 
 docs/design.md's "Scenario contract" (and ``docs/scenarios.md``): the world keys are
 :class:`rrtq_common.world.World`'s; each section is the settings dataclass of the core
-it configures — ``plant:`` :class:`rrtq_sim.plant.PlantConfig`, ``disturbance:``
+it configures — ``plant:`` :class:`rrtq_sim.plant.PlantConfig` (and ``plant.odometry_noise``
+:class:`rrtq_sim.odometry.OdometryNoiseConfig`), ``disturbance:``
 :class:`rrtq_sim.disturbance.DisturbanceConfig`, ``controller:``
 :class:`rrtq_controller.config.ControllerConfig`, ``planner:``
 :class:`rrtq_planner.session.PlannerConfig` (and two settings it hands on: the safety
@@ -24,6 +25,7 @@ from rrtq_planner.guidance import GuidanceConfig
 from rrtq_planner.safety import SafetyConfig
 from rrtq_planner.session import PlannerConfig
 from rrtq_sim.disturbance import DisturbanceConfig
+from rrtq_sim.odometry import OdometryNoiseConfig
 from rrtq_sim.plant import PlantConfig
 
 __all__ = ['Scenario']
@@ -55,6 +57,8 @@ class Scenario(World):
         guiding vector field's reference).
     lpc : LPCConfig
         ``controller.vf_lpc``: the vf_lpc controller's solver and compensation.
+    odometry_noise : OdometryNoiseConfig
+        ``plant.odometry_noise``: what the simulator's /odom adds to the true state.
     """
 
     path: str
@@ -71,3 +75,4 @@ class Scenario(World):
     goal_tolerance: float = like(MissionConfig, 'goal_tolerance')
     guidance: GuidanceConfig = field(default_factory=GuidanceConfig)
     lpc: LPCConfig = field(default_factory=LPCConfig)
+    odometry_noise: OdometryNoiseConfig = field(default_factory=OdometryNoiseConfig)

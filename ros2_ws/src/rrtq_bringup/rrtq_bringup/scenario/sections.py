@@ -8,6 +8,7 @@ shapes that depend on the plant, settings required by a variant or a model.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -24,12 +25,18 @@ from rrtq_planner.safety import SafetyConfig
 from rrtq_planner.session import PlannerConfig
 from rrtq_sim.disturbance import DisturbanceConfig, DisturbanceModel
 from rrtq_sim.field import field_input_matrix
+from rrtq_sim.odometry import OdometryNoiseConfig
 from rrtq_sim.plant import PlantConfig, PlantModel, rover_matrices
 
-__all__ = ['read_plant', 'read_disturbance', 'read_controller', 'read_planner', 'read_safety']
+__all__ = ['read_plant', 'read_odometry_noise', 'read_disturbance', 'read_controller',
+           'read_planner', 'read_safety']
 
-_ROVER_KEYS = ('model', 'mass', 'stiffness', 'damping', 'spring_anchor', 'force_limit')
-_LTI_KEYS = ('model', 'A', 'B', 'spring_anchor', 'force_limit')
+_SENSING_KEYS = ('actuation_delay', 'odometry_noise')
+_ROVER_KEYS = ('model', 'mass', 'stiffness', 'damping', 'spring_anchor', 'force_limit',
+               *_SENSING_KEYS)
+_LTI_KEYS = ('model', 'A', 'B', 'spring_anchor', 'force_limit', *_SENSING_KEYS)
+# plant.odometry_noise key -> OdometryNoiseConfig field
+_NOISE_KEYS = {'position': 'position_std', 'velocity': 'velocity_std'}
 _DIST_KEYS = ('model', 'F', 'amplitude', 'frequency', 'gamma', 'bumps')
 _BUMP_KEYS = ('center', 'radius', 'value')
 _SAFETY_KEYS = ('margin', 'confidence', 'window', 'initial_margin', 'calibration',
@@ -79,7 +86,19 @@ def read_plant(r: Reader, raw: Any) -> PlantConfig:
         b = r.matrix(data['B'], 'plant.B', (a.shape[0], None))
         mass = stiffness = damping = np.nan
     return PlantConfig(model=model, A=frozen(a), B=frozen(b), mass=mass, stiffness=stiffness,
-                       damping=damping, spring_anchor=anchor, force_limit=limit)
+                       damping=damping, spring_anchor=anchor, force_limit=limit,
+                       actuation_delay=r.setting(data, 'actuation_delay', PlantConfig, key))
+
+
+def read_odometry_noise(r: Reader, raw: Any) -> OdometryNoiseConfig:
+    """``plant.odometry_noise: {position: m, velocity: m/s}`` (``raw``: the plant section)."""
+    plant = raw if isinstance(raw, Mapping) else {}
+    key = 'plant.odometry_noise'
+    data = r.mapping({} if plant.get('odometry_noise') is None else plant['odometry_noise'],
+                     key, tuple(_NOISE_KEYS))
+    return OdometryNoiseConfig(**{name: r.setting(data, name, OdometryNoiseConfig, key,
+                                                  key=file_key)
+                                  for file_key, name in _NOISE_KEYS.items()})
 
 
 def read_disturbance(r: Reader, raw: Any, n: int, needs_f: bool) -> DisturbanceConfig:
@@ -243,7 +262,7 @@ def read_planner(r: Reader, raw: Any,
     (x0, x1), (y0, y1) = world.bounds
     planner = PlannerConfig(bounds=(x0, x1, y0, y1), **{
         name: values[name] for name, cls in _PLANNER_KEYS.items() if cls is PlannerConfig})
-    safety = SafetyConfig(robot_radius=world.robot_radius,
+    safety = SafetyConfig(robot_radius=world.robot_radius, bounds=(x0, x1, y0, y1),
                           growth_threshold=values['growth_threshold'])
     return planner, safety, values['goal_tolerance']
 

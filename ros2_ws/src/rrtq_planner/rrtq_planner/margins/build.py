@@ -39,7 +39,7 @@ class MarginConfig:
         check(self, finite=True)
 
 
-def make_policy(mode: MarginMode | str, *, region: Bounds, dt: float,
+def make_policy(mode: MarginMode | str, *, region: Bounds | None, dt: float,
                 confidence: float = 0.95, window: int = 50,
                 initial_margin: float | None = None, calibration: Sequence[float] = (),
                 frame: ModelFrame | str = ModelFrame.LEG_TARGET,
@@ -52,7 +52,8 @@ def make_policy(mode: MarginMode | str, *, region: Bounds, dt: float,
     mode
         ``running_max`` | ``conformal`` | ``learned_bound``.
     region
-        The scenario's bounds, m (learned_bound: where the field is learned).
+        The scenario's bounds, m (learned_bound: where the field is learned; the other
+        modes take None).
     dt
         The loop's step, s.
     confidence, window, initial_margin, calibration
@@ -69,6 +70,8 @@ def make_policy(mode: MarginMode | str, *, region: Bounds, dt: float,
     if mode is MarginMode.CONFORMAL:
         return ConformalPolicy(ConformalConfig(confidence=confidence, window=window),
                                initial_margin, calibration)
+    if region is None:
+        raise ValueError('learned_bound needs the region (the scenario\'s bounds)')
     return LearnedBoundPolicy(LearnedBoundConfig(region=region, dt=dt, frame=ModelFrame(frame),
                                                  confidence=confidence, window=window,
                                                  prior_bound=prior_bound,
