@@ -44,7 +44,12 @@ plant, by the true Riccati policy from the same x̄0 through the leg's recorded 
 plant's saturation, over the recorded leg's steps, plus the cost-to-go from where it is
 then (``riccati_policy_cost``; ``ratio_riccati_policy`` = cost over it, 1 for the optimal
 feedback with or without a disturbance): the reference the random-plant bench holds the
-learner to.
+learner to. With odometry noise and an actuation delay (``plant.odometry_noise``,
+``plant.actuation_delay``) the reference is handicapped as the robot was: it sees the
+state with the noise the robot's odometry had at each step (/odom − /odom/truth) and its
+commands act ``delay`` steps late, the first ones of the leg taken by the forces already
+commanded. The cost itself is always of the true state (/odom/truth when recorded) and
+the force the plant applied (the command ``delay`` steps before).
 
 Gain error: with the actor weights Ŵa ((L n) x m) published every step and the time
 basis φ(τ) recorded beside them (:class:`rrtq_controller.basis.TimeBasis`), the learned
@@ -59,6 +64,7 @@ from __future__ import annotations
 import dataclasses
 import enum
 import math
+from collections import deque
 from typing import Any
 
 import numpy as np
@@ -68,6 +74,7 @@ from rrtq_bringup.leg_model import LegModel, gain_from_actor, time_basis_of
 from rrtq_bringup.scenario import Scenario
 from rrtq_controller.basis import TimeBasis
 from rrtq_sim.plant import SpringAnchor
+from rrtq_sim.simulation import delay_steps
 
 __all__ = ['Quadrature', 'QUADRATURES', 'LegEnd', 'LegRow', 'LegTable', 'leg_table', 'summary',
            'format_table']
@@ -196,39 +203,56 @@ class _Steps:
 
     t: Array
     x: Array
+    """The true state (/odom/truth when recorded, else /odom)."""
+    noise: Array
+    """What the odometry added to it: /odom - /odom/truth (zero without /odom/truth)."""
     u: Array
+    """The force the plant applied over the step: the command ``delay`` steps before,
+    saturated (zero before the first)."""
     d: Array
     leg: NDArray[np.int64]
     target: Array
     d0: Array
     actor_w: list[Array]
     tail: tuple[float, Array] | None
-    """The odometry sample after the last answered step (time, state), if recorded."""
+    """The odometry sample after the last answered step (time, true state), if recorded."""
+    commanded: Array
+    """The command of each step, saturated (what enters the actuator's delay line)."""
+    delay: int
+    """Steps between a command and the step it acts over (``plant.actuation_delay``)."""
 
 
 def _align(data: Any, sc: Scenario) -> _Steps:
-    """Join /controller/state, /odom, /cmd_force, /disturbance by stamp (one row per step)."""
+    """Join /controller/state, /odom(/truth), /cmd_force, /disturbance by stamp (one row per step)."""
     q = sc.disturbance.q
+    true_t, true_x = data.true_state() if hasattr(data, 'true_state') else (data.odom_t,
+                                                                               data.odom_x)
     state_t = np.asarray(data.state_t, dtype=float)
     order = np.argsort(state_t, kind='stable')
     skeys = _keys(state_t[order])
-    oi, ci = _lookup(skeys, data.odom_t), _lookup(skeys, data.cmd_t)
-    ok = (oi >= 0) & (ci >= 0)
-    order, oi, ci, skeys = order[ok], oi[ok], ci[ok], skeys[ok]
+    oi, ci = _lookup(skeys, true_t), _lookup(skeys, data.cmd_t)
+    mi = _lookup(skeys, data.odom_t)
+    ok = (oi >= 0) & (ci >= 0) & (mi >= 0)
+    order, oi, ci, mi, skeys = order[ok], oi[ok], ci[ok], mi[ok], skeys[ok]
     _, first = np.unique(skeys, return_index=True)    # a resent step is answered twice
-    order, oi, ci = order[first], oi[first], ci[first]
+    order, oi, ci, mi = order[first], oi[first], ci[first], mi[first]
     t = state_t[order]
     limit = sc.plant.force_limit
-    u = np.clip(np.asarray(data.cmd_u, dtype=float)[ci], -limit, limit)
+    commanded = np.clip(np.asarray(data.cmd_u, dtype=float)[ci], -limit, limit)
+    delay = delay_steps(sc.plant.actuation_delay, sc.controller.dt)
+    u = np.vstack([np.zeros((min(delay, len(t)), commanded.shape[1])),
+                   commanded[:max(len(t) - delay, 0)]])
+    x = np.asarray(true_x, dtype=float)[oi]
     d = np.zeros((t.size, q))
     if q and np.asarray(data.dist_t).size:
         di = _lookup(_keys(t), data.dist_t)
         dist = np.asarray(data.dist_d, dtype=float).reshape(-1, q)
         d = np.where(di[:, None] >= 0, dist[np.maximum(di, 0)], 0.0)
-    odom_t = np.asarray(data.odom_t, dtype=float)
+    odom_t = np.asarray(true_t, dtype=float)
     after = odom_t > (t[-1] + 1e-7) if t.size else np.zeros(0, dtype=bool)
-    tail = (float(odom_t[after][0]), np.asarray(data.odom_x)[after][0]) if after.any() else None
-    return _Steps(t=t, x=np.asarray(data.odom_x, dtype=float)[oi], u=u, d=d,
+    tail = (float(odom_t[after][0]), np.asarray(true_x)[after][0]) if after.any() else None
+    return _Steps(t=t, x=x, noise=np.asarray(data.odom_x, dtype=float)[mi] - x, u=u, d=d,
+                  commanded=commanded, delay=delay,
                   leg=np.asarray(data.leg_index)[order],
                   target=np.asarray(data.leg_target, dtype=float).reshape(-1, 2)[order],
                   d0=np.asarray(data.d0, dtype=float)[order],
@@ -265,18 +289,25 @@ def _running_cost(mdl: LegModel, xb: Array, nxt: Array, u: Array, d: Array, time
 
 
 def _riccati_policy_cost(mdl: LegModel, x0: Array, d: Array, times: Array, T: float,
-                         limit: float) -> float:
+                         limit: float, noise: Array | None = None,
+                         pending: Array | None = None) -> float:
     """Cost of the true Riccati policy from x̄0 through the recorded d_k, saturated at ``limit``.
 
     It flies the recorded leg's steps (``times``: their stamps and the leg's end), τ
     clipped at 0 as the controller clips it, and the optimal cost-to-go from where it is
     then completes it, as for the recorded leg: the same interval, the same disturbance.
+    It sees the state as the robot's odometry did (``noise``: per step, what the odometry
+    added to the truth) and its commands go through the same actuator delay: ``pending``
+    holds the forces already commanded at the leg's start, applied over its first steps
+    (one per step of delay), before its own.
     """
     x, cost = np.asarray(x0, dtype=float).copy(), 0.0
+    queue = deque(np.asarray(pending if pending is not None else np.zeros((0, mdl.m)), dtype=float))
     for k in range(d.shape[0]):
         tau = max(T - float(times[k] - times[0]), 0.0)
-        step_cost, x = mdl.step(x, np.clip(mdl.policy(x, tau), -limit, limit), d[k],
-                                float(times[k + 1] - times[k]))
+        seen = x if noise is None else x + noise[k]
+        queue.append(np.clip(mdl.policy(seen, tau), -limit, limit))
+        step_cost, x = mdl.step(x, queue.popleft(), d[k], float(times[k + 1] - times[k]))
         cost += step_cost
     return cost + mdl.value(x, max(T - float(times[-1] - times[0]), 0.0))
 
@@ -378,7 +409,8 @@ def leg_table(data: Any, scenario: Scenario, quadrature: str = Quadrature.ZOH) -
             gain_error=_gain_error(mdl, st.actor_w[s:e], taus, basis),
             ended_by=ended, model_residual=resid,
             riccati_policy_cost=_riccati_policy_cost(mdl, x0, st.d[s:e], times, T,
-                                                     float(sc.plant.force_limit))))
+                                                     float(sc.plant.force_limit),
+                                                     st.noise[s:e], st.u[s:s + st.delay])))
     return LegTable(tuple(rows), T, rule, note)
 
 
