@@ -62,6 +62,11 @@ def test_read_odometry_reads_what_deserialising_gives(frame_id, child_frame_id):
     assert reading.orientation == (q.x, q.y, q.z, q.w)
     assert reading.velocity == (lin.x, lin.y)
     assert conv.odometry_state(reading).tobytes() == conv.odometry_state(decoded).tobytes()
+    # the covariances' diagonal for x, y and v_x, v_y: what the controller's observer smooths by
+    assert conv.odometry_variance(reading).tobytes() == conv.odometry_variance(decoded).tobytes()
+    assert conv.odometry_variance(reading).tolist() == [
+        decoded.pose.covariance[0], decoded.pose.covariance[7],
+        decoded.twist.covariance[0], decoded.twist.covariance[7]]
 
 
 def test_read_odometry_of_the_simulators_message():

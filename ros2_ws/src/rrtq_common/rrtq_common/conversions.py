@@ -72,6 +72,9 @@ class OdometryReading(NamedTuple):
     position: tuple[float, float, float]             # pose.pose.position, m
     orientation: tuple[float, float, float, float]   # pose.pose.orientation x, y, z, w
     velocity: tuple[float, float]                    # twist.twist.linear x, y, m/s
+    variance: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    """The covariances' diagonal for x, y (m²) and v_x, v_y (m²/s²): what the odometry says
+    of its own noise."""
 
 
 _STAMP = struct.Struct('<iI')
@@ -79,6 +82,8 @@ _LENGTH = struct.Struct('<I')
 _POSE = struct.Struct('<7d')
 _LINEAR = struct.Struct('<2d')
 _COVARIANCE = 36 * 8
+_DIAGONAL = struct.Struct('<d48xd')                  # covariance entries 0 and 7 (x, y)
+_TWIST = 6 * 8
 
 
 def read_odometry(data: bytes) -> OdometryReading:
@@ -102,9 +107,20 @@ def read_odometry(data: bytes) -> OdometryReading:
     _child, at = string(at)
     at += -at % 8
     pose = _POSE.unpack_from(body, at)
-    linear = _LINEAR.unpack_from(body, at + _POSE.size + _COVARIANCE)
+    position = _DIAGONAL.unpack_from(body, at + _POSE.size)
+    twist = at + _POSE.size + _COVARIANCE
+    linear = _LINEAR.unpack_from(body, twist)
+    velocity = _DIAGONAL.unpack_from(body, twist + _TWIST)
     return OdometryReading(Header(stamp=Time(sec=sec, nanosec=nanosec), frame_id=frame_id),
-                           pose[:3], pose[3:], linear)
+                           pose[:3], pose[3:], linear, position + velocity)
+
+
+def odometry_variance(msg: Odometry | OdometryReading) -> np.ndarray:
+    """The variance of (p_x, p_y, v_x, v_y)'s measurement: the covariances' diagonal."""
+    if isinstance(msg, OdometryReading):
+        return np.array(msg.variance, dtype=float)
+    return np.array([msg.pose.covariance[0], msg.pose.covariance[7],
+                     msg.twist.covariance[0], msg.twist.covariance[7]], dtype=float)
 
 
 def odometry_state(msg: Odometry | OdometryReading) -> np.ndarray:

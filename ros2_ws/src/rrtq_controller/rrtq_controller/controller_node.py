@@ -131,6 +131,7 @@ class ControllerNode(Node):
         odom, plan, dist = step['odom'], step.get('plan'), step.get('disturbance')
         t = step.stamp_ns * 1e-9
         augmented = conv.changed_obstacles(step.get('augmented'))
+        self.driver.set_odometry_variance(conv.odometry_variance(odom))
         out = self.driver.control(
             t, conv.odometry_state(odom), conv.changed_path(plan),
             None if dist is None else dist.value, changed_reference(step.get('reference')),

@@ -8,6 +8,7 @@ terminal row (e_c2, sign flipped to a residual); see :mod:`bellman`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -25,7 +26,11 @@ class SampleWindow:
 
     Each sample yields a Bellman row for *any* policy (the off-policy form of e_c1, see
     :mod:`bellman`), so the window serves the least-squares policy evaluation and the
-    guard's checks of a proposed policy alike.
+    guard's checks of a proposed policy alike. It keeps each sample as measured (the
+    odometry, the force applied) and, for learning, the same sample as the robot's
+    :class:`rrtq_controller.observer.Observer` estimates it (smoothed states, the
+    equivalent input): :meth:`samples` gives the latter, which are the measured ones until
+    :meth:`estimate` replaces them.
     """
 
     def __init__(self, capacity: int, n: int, m: int, q: int) -> None:
@@ -33,21 +38,52 @@ class SampleWindow:
         self._tau0, self._tau1 = np.zeros(C), np.zeros(C)
         self._x0, self._x1 = np.zeros((C, n)), np.zeros((C, n))
         self._u, self._d = np.zeros((C, m)), np.zeros((C, q))
+        self._measured = (np.zeros((C, n)), np.zeros((C, n)), np.zeros((C, m)))
+        self._step = np.full(C, -1, dtype=np.int64)
         self.count = 0
         self._head = 0
 
-    def add_sample(self, tau0: float, x0: Array, tau1: float, x1: Array, u: Array, d: Array) -> None:
-        """Store one Δt: time-to-go and state at both ends, the applied control and disturbance."""
+    def add_sample(self, tau0: float, x0: Array, tau1: float, x1: Array, u: Array, d: Array,
+                   step: int = -1) -> None:
+        """Store one Δt: time-to-go and state at both ends, the applied control and disturbance.
+
+        ``step``: the id of its first end in the observer's log (-1: none).
+        """
         i = self._head
         self._tau0[i], self._tau1[i], self._x0[i], self._x1[i] = tau0, tau1, x0, x1
-        self._u[i], self._d[i] = u, d
+        self._u[i], self._d[i], self._step[i] = u, d, step
+        for stored, value in zip(self._measured, (x0, x1, u), strict=True):
+            stored[i] = value
         self._head = (i + 1) % len(self._tau0)
         self.count = min(self.count + 1, len(self._tau0))
 
     def samples(self) -> tuple[Array, Array, Array, Array, Array, Array]:
-        """(τ0, x̄0, τ1, x̄1, u, d) of every stored sample (views; not in time order)."""
+        """(τ0, x̄0, τ1, x̄1, u, d) of every stored sample as learned from (views; not in time order)."""
         c = self.count
         return (self._tau0[:c], self._x0[:c], self._tau1[:c], self._x1[:c], self._u[:c], self._d[:c])
+
+    def applied(self) -> Array:
+        """The force applied in each stored sample, as commanded (N; the order of :meth:`samples`)."""
+        return self._measured[2][:self.count]
+
+    def order(self) -> NDArray[np.intp]:
+        """Indices of the stored samples in the order they were taken (oldest first)."""
+        c, capacity = self.count, len(self._tau0)
+        return np.arange(c) if c < capacity else (np.arange(c) + self._head) % capacity
+
+    def steps(self) -> NDArray[np.int64]:
+        """The observer's step id of each stored sample's first end (the order of :meth:`samples`)."""
+        return self._step[:self.count]
+
+    def estimate(self, x0: Array, x1: Array, u: Array, known: NDArray[np.bool_]) -> None:
+        """Learn from these states and inputs where ``known``, from the measured ones elsewhere.
+
+        Arrays in the order of :meth:`samples`.
+        """
+        c = self.count
+        for learned, measured, value in zip((self._x0, self._x1, self._u), self._measured,
+                                            (x0, x1, u), strict=True):
+            learned[:c] = np.where(known[:, None], value, measured[:c])
 
 
 def _system(rows: RowBuilder, window: SampleWindow) -> tuple[Array, Array, Array]:
@@ -64,27 +100,67 @@ def _relative_residual(S: Array, y: Array, w: Array, theta: Array) -> float:
     return float(np.sqrt(w @ (e * e))) / scale if scale > 0 else 0.0
 
 
-def fit(rows: RowBuilder, window: SampleWindow, prior: Array, ridge: float) -> tuple[Array, float]:
+@dataclass(frozen=True)
+class Fit:
+    """A least-squares critic fit and how far its weights can be from the truth by noise."""
+
+    theta: Array
+    residual: float
+    """The relative residual √(Σ w e²) / √(Σ w y²) (0 when no data)."""
+    spread: Array | None = None
+    """Σ_θ (p x p): the covariance of θ, a sandwich estimate (heteroscedastic rows) inflated
+    by the long-run variance of the residuals in time order; None without data."""
+
+    def standard_errors(self, g: Array) -> Array:
+        """The standard error of gᵀθ for each row g of ``g`` (k, p): √(gᵀ Σ_θ g)."""
+        if self.spread is None:
+            return np.zeros(len(g))
+        return np.sqrt(np.maximum(np.einsum('ij,jk,ik->i', g, self.spread, g), 0.0))
+
+
+LONG_RUN_LAGS = 20
+"""Lags (Δt each: 1 s) of the residuals' autocorrelation in the long-run variance of a fit:
+neighbouring rows share a state, and smoothed states share their neighbours' noise."""
+
+
+def fit(rows: RowBuilder, window: SampleWindow, prior: Array, ridge: float) -> Fit:
     """Least squares over the window's rows for the policy that ``rows`` forms them for.
 
     ``θ = argmin Σ (σθ + k)² / (1 + σᵀσ) + ε ‖θ - θ_prior‖²`` (rows normalised as in the
     gradient law; the ridge ε, relative to the mean non-zero diagonal of the normal
     matrix, keeps directions the data do not excite where they were).
 
-    Returns
-    -------
-    tuple
-        θ and the relative residual √(Σ w e²) / √(Σ w y²) of the fit (0 when no data).
+    The covariance of θ (:attr:`Fit.spread`) is the sandwich A⁻¹ (Σ w² e² σσᵀ) A⁻¹ with A the
+    regularised normal matrix (White's estimator: rows of unequal noise), times the
+    Bartlett-weighted sum of the residuals' autocorrelations over :data:`LONG_RUN_LAGS`
+    steps of the window in time order (Newey-West's long-run variance, for a scalar
+    factor): what the guard's tests of a fit use to tell noise from a wrong critic.
     """
     if window.count == 0:
-        return prior.copy(), 0.0
+        return Fit(prior.copy(), 0.0)
     S, y, w = _system(rows, window)
     G = S.T @ (w[:, None] * S)
     # the mean over the directions the rows reach: the disturbance's weights of a run
     # without one (d = 0 throughout) neither move nor change the others' fit
     eps = ridge * (np.trace(G) / max(np.count_nonzero(np.diag(G)), 1) + 1e-12)
-    theta = np.linalg.solve(G + eps * np.eye(prior.size), S.T @ (w * y) + eps * prior)
-    return theta, _relative_residual(S, y, w, theta)
+    A = G + eps * np.eye(prior.size)
+    theta = np.linalg.solve(A, S.T @ (w * y) + eps * prior)
+    e = S @ theta - y
+    h = S * (w * e)[:, None]
+    Ainv = np.linalg.inv(A)
+    spread = Ainv @ (h.T @ h) @ Ainv * _long_run_factor(e[:window.count], window.order())
+    return Fit(theta, _relative_residual(S, y, w, theta), 0.5 * (spread + spread.T))
+
+
+def _long_run_factor(e: Array, order: NDArray[np.intp]) -> float:
+    """1 + 2 Σ_k (1 - k / (L + 1)) ρ_k of residuals e in time order (at least 1)."""
+    r = e[order] - e.mean()
+    var = float(r @ r)
+    if var <= 0.0 or len(r) < 2 * LONG_RUN_LAGS:
+        return 1.0
+    rho = [float(r[:-k] @ r[k:]) / var for k in range(1, LONG_RUN_LAGS + 1)]
+    factor = 1.0 + 2.0 * sum((1.0 - k / (LONG_RUN_LAGS + 1)) * rk for k, rk in enumerate(rho, 1))
+    return max(factor, 1.0)
 
 
 def residual(rows: RowBuilder, window: SampleWindow, theta: Array) -> float:
@@ -110,6 +186,8 @@ class GradientCritic:
         self._gain = config.gains.alpha_c * config.dt
         self.window = SampleWindow(config.critic_memory, n, m, q)
         self.residual = 0.0
+        self.last = Fit(self.theta, 0.0)
+        """The guard's view of the weights: no spread (the gradient law has no fit)."""
 
     def update(self, sig: Array, k: Array) -> None:
         """Apply one Euler step of (22) for rows σ (R, K) with errors e = σθ + k."""
@@ -138,10 +216,13 @@ class LeastSquaresCritic:
         self._ridge = config.ridge
         self.residual = 0.0
         """Relative residual of the last fit (see :func:`fit`)."""
+        self.last = Fit(self.theta, 0.0)
+        """The last fit, with its spread."""
 
-    def add_sample(self, tau0: float, x0: Array, tau1: float, x1: Array, u: Array, d: Array) -> None:
+    def add_sample(self, tau0: float, x0: Array, tau1: float, x1: Array, u: Array, d: Array,
+                   step: int = -1) -> None:
         """Store one Δt (see :meth:`SampleWindow.add_sample`)."""
-        self.window.add_sample(tau0, x0, tau1, x1, u, d)
+        self.window.add_sample(tau0, x0, tau1, x1, u, d, step)
 
     @property
     def count(self) -> int:
@@ -151,7 +232,8 @@ class LeastSquaresCritic:
     def evaluate(self, rows: RowBuilder) -> None:
         """Policy evaluation: solve for θ over all stored samples with the current actors."""
         # θ's size is read in fit: widening the time basis enlarges it
-        self.theta, self.residual = fit(rows, self.window, self.theta, self._ridge)
+        self.last = fit(rows, self.window, self.theta, self._ridge)
+        self.theta, self.residual = self.last.theta, self.last.residual
 
 
 Critic = GradientCritic | LeastSquaresCritic

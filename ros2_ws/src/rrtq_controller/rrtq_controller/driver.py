@@ -109,6 +109,12 @@ class Driver(abc.ABC):
         vf_lpc only (the augmented obstacles carry its barrier); the others ignore them.
         """
 
+    def set_odometry_variance(self, variance: ArrayLike) -> None:  # noqa: B027
+        """Take the variance of each state's measurement (the odometry's covariance diagonal).
+
+        The learning variants allow for it (``QLearningController.set_odometry_variance``).
+        """
+
     @abc.abstractmethod
     def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> None:
         """Adopt the planner's waypoints (the robot's next waypoint first, the goal last)."""
@@ -181,6 +187,10 @@ class LearningDriver(Driver):
     def warnings(self) -> list[str]:
         """The configured gains that violate a stability bound."""
         return self.controller.warnings
+
+    def set_odometry_variance(self, variance: ArrayLike) -> None:
+        """See :meth:`QLearningController.set_odometry_variance`."""
+        self.controller.set_odometry_variance(np.asarray(variance, dtype=float))
 
     def set_plan(self, waypoints: ArrayLike, x: ArrayLike, t: float) -> None:
         """Adopt the planner's waypoints (the robot's next waypoint first, the goal last).

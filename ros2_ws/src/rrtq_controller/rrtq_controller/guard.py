@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import enum
 import math
+from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import norm
 
 from rrtq_common.geometry import kinodynamic_distance, ray_distance, segment_distance
 
@@ -227,14 +229,62 @@ class DivergenceWatch:
         return 0.0 if self.line is None else ray_distance(self.line, (0.0, 0.0), x)
 
 
+FALSE_ALARM = 0.01
+"""α: the rate at which a rule of the guard calls an effect that measurement noise alone made
+(a force too weak, a reversal, a robot not at rest)."""
+
+
+@dataclass
+class Sensing:
+    """What the on-line rules of :class:`Brake` and :class:`KeepOff` must allow for.
+
+    Those rules judge what the last force did from the measured velocity: did the speed fall
+    fast enough, did the motion reverse, is the robot at rest. Two things of a real robot
+    blur that judgement: odometry noise (σ_v m/s per axis, the odometry's covariance) and
+    actuation delay (a force acts ``dead_steps`` steps after it is commanded; the observer
+    identifies it, :attr:`rrtq_controller.observer.OneStepModel.delay`). So the rules compare
+    speeds :attr:`lag` = 1 + ``dead_steps`` steps apart (the first step a change can show),
+    change a force at most once per lag, and call an effect only where it stands out of
+    the noise at the false-alarm rate :data:`FALSE_ALARM` (a one-sided normal quantile on
+    the difference of two speeds, σ_v √2; a Rayleigh quantile for a speed at rest). With
+    exact, instant odometry (the defaults of the simulator) every allowance is zero and
+    the rules are the step-to-step ones of before.
+    """
+
+    velocity_std: float = 0.0
+    """σ_v, m/s per axis."""
+    dead_steps: int = 0
+    """Steps a commanded force takes to act."""
+
+    @property
+    def lag(self) -> int:
+        """Steps between the speeds a rule compares."""
+        return 1 + max(int(self.dead_steps), 0)
+
+    @property
+    def difference(self) -> float:
+        """m/s: how much one speed may exceed another by noise alone (at the false-alarm rate)."""
+        return float(norm.ppf(1.0 - FALSE_ALARM)) * math.sqrt(2.0) * self.velocity_std
+
+    def rest(self, floor: float) -> float:
+        """m/s: the speed below which a robot counts as at rest.
+
+        ``floor`` with exact odometry; with noise, at least the speed a robot at rest shows
+        with probability :data:`FALSE_ALARM` (|n| of a 2-D normal is Rayleigh:
+        P(|n| > r) = exp(-r² / 2σ_v²)).
+        """
+        return max(floor, self.velocity_std * math.sqrt(2.0 * math.log(1.0 / FALSE_ALARM)))
+
+
 def slowing_too_little(speed: float, before: float, dt: float, stop_time: float,
-                       rest_speed: float) -> bool:
-    """Whether a speed that was ``before`` one step ago fell too little to stop in ``stop_time``.
+                       rest_speed: float, allowance: float = 0.0) -> bool:
+    """Whether a speed that was ``before`` one interval ``dt`` ago fell too little to stop in ``stop_time``.
 
     The rule by which :class:`Brake` and :class:`KeepOff` double their force: above
-    ``rest_speed``, the speed must fall by at least speed Δt / ``stop_time`` per step.
+    ``rest_speed``, the speed must fall by at least speed Δt / ``stop_time`` per step; it
+    is called too little only by more than ``allowance`` (m/s, :attr:`Sensing.difference`).
     """
-    return speed > rest_speed and speed > before * (1.0 - dt / stop_time)
+    return speed > rest_speed and speed > before * (1.0 - dt / stop_time) + allowance
 
 
 @dataclass
@@ -269,13 +319,19 @@ class Brake:
     force: float = 0.0
     prev: Array | None = None
     at_rest: bool = False
-    """Whether the speed was at most ``rest_speed`` at the last step."""
+    """Whether the speed was at most the rest speed at the last step."""
+    sensing: Sensing = field(default_factory=Sensing)
+    """Odometry noise and actuation delay the rules allow for (:class:`Sensing`)."""
+    _recent: deque[Array] = field(default_factory=deque)
+    _wait: int = 0
 
     def start(self, force: float) -> None:
         """A new hold from ``force`` (N), no previous velocity."""
         self.force = min(force, self.limit)
         self.prev = None
         self.at_rest = False
+        self._recent.clear()
+        self._wait = 0
 
     def __call__(self, x: Array, m: int) -> Array:
         """The braking force (m,) for the state x̄; zero when x̄ has no velocity part."""
@@ -284,15 +340,26 @@ class Brake:
             return np.zeros(m)
         v = x[2:2 + m]
         speed = float(np.linalg.norm(v))
-        if self.prev is not None:
-            before = float(np.linalg.norm(self.prev))
-            if float(v @ self.prev) < 0.0:
+        sense, rest = self.sensing, self.sensing.rest(self.rest_speed)
+        lag = sense.lag
+        self._recent.append(v.copy())
+        while len(self._recent) > lag + 1:
+            self._recent.popleft()
+        if self._wait > 0:
+            self._wait -= 1               # the last change has not shown yet
+        elif len(self._recent) > lag:
+            then = self._recent[0]        # lag steps ago
+            before = float(np.linalg.norm(then))
+            noise = sense.difference
+            if float(v @ then) < 0.0 and min(speed, before) > noise / math.sqrt(2.0):
                 self.force *= 0.5
-            elif slowing_too_little(speed, before, self.dt, self.stop_time, self.rest_speed):
+                self._wait = lag - 1
+            elif slowing_too_little(speed, before, lag * self.dt, self.stop_time, rest, noise):
                 self.force = min(2.0 * self.force, self.limit)
+                self._wait = lag - 1
         self.prev = v.copy()
-        self.at_rest = speed <= self.rest_speed
-        return np.asarray(-self.force * v / max(speed, self.rest_speed), dtype=float)
+        self.at_rest = speed <= rest
+        return np.asarray(-self.force * v / max(speed, rest), dtype=float)
 
 
 @dataclass
@@ -347,6 +414,10 @@ class KeepOff:
     """The approach speed a at the last pushing step (None: not pushing)."""
     push: float = 0.0
     """N: how much the last step raised the command along n (0: not acting)."""
+    sensing: Sensing = field(default_factory=Sensing)
+    """Odometry noise and actuation delay the rules allow for (:class:`Sensing`)."""
+    _recent: deque[float] = field(default_factory=deque)
+    _wait: int = 0
 
     head_on: float = math.cos(math.pi / 4.0)
     """The look-ahead is for approaches within 45° of head-on (a >= this |v|)."""
@@ -383,24 +454,37 @@ class KeepOff:
         a = -float(v @ n)
         inside = distance < self.zone
         want = 0.0 if inside else -math.inf        # in the zone: no force toward it
-        if a <= 0.0:
+        sense, rest = self.sensing, self.sensing.rest(self.rest_speed)
+        lag, noise = sense.lag, sense.difference
+        # moving away: by more than noise alone shows (with exact odometry, not approaching)
+        if a < -noise / math.sqrt(2.0) if noise else a <= 0.0:
             if self.prev is not None:
                 self.force *= 0.5                  # the approach reversed: it overshot
             self.prev = None
-        else:
+            self._recent.clear()
+        elif a > 0.0:
             # s to contact at this speed (>= Δt); ahead of the zone, twice the time to reach
             # it: the speed falling at a constant rate just stops there
             contact = max(distance, self.dt * a) / a if inside else 2.0 * (distance - self.zone) / a
-            short = self.prev is not None and slowing_too_little(a, self.prev, self.dt, contact,
-                                                                 self.rest_speed)
+            self._recent.append(a)
+            while len(self._recent) > lag + 1:
+                self._recent.popleft()
+            short = False
+            if self._wait > 0:
+                self._wait -= 1                    # the last change has not shown yet
+            elif self.prev is not None and len(self._recent) > lag:
+                short = slowing_too_little(a, self._recent[0], lag * self.dt, contact, rest,
+                                           noise)
             if self.force <= 0.0:
                 if inside or short:                # ahead of the zone: only once it must
                     self.force = min(max(scale(), 1.0), self.limit)
+                    self._wait = lag - 1
             elif short:
                 self.force = min(2.0 * self.force, self.limit)
+                self._wait = lag - 1
             self.prev = a
             if self.force > 0.0:
-                want = self.force * min(1.0, a / self.rest_speed)
+                want = self.force * min(1.0, a / rest)
         along = float(u @ n)
         if along >= want:
             return u
@@ -410,6 +494,8 @@ class KeepOff:
     def release(self) -> None:
         """Out of the zone: no push, and the next engagement starts afresh."""
         self.force, self.prev, self.push = 0.0, None, 0.0
+        self._recent.clear()
+        self._wait = 0
 
 
 def face_ahead(distance: float, normal: Array, velocity: Array) -> tuple[float, Array]:

@@ -29,8 +29,9 @@ from .basis import QuadraticBasis, TimeBasis
 from .bellman import Policy, bellman_rows
 from .config import ActorLaw, ControllerConfig, SafeHold, StepInfo, Variant
 from .critic import LeastSquaresCritic, fit, make_critic, residual
-from .guard import (Brake, DivergenceWatch, KeepOff, PolicyEvent, face_ahead, held_below,
-                    trust_step)
+from .guard import (Brake, DivergenceWatch, KeepOff, PolicyEvent, Sensing, face_ahead,
+                    held_below, trust_step)
+from .observer import Observer
 from .probing import Probing
 from .readout import WeightReadout, _features
 from .stability import gain_warnings
@@ -93,9 +94,18 @@ class QLearningController(WeightReadout):
                                       c.divergence_speed, c.horizon,
                                       deviation=c.divergence_deviation, stop_time=c.hold_stop_time)
         self._held = False
-        self._brake = Brake(c.force_limit, c.hold_stop_time, c.dt)
-        self._keep_off = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time)
-        self._keep_ahead = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time)
+        self.sensing = Sensing()
+        """Odometry noise and actuation delay the keep-offs allow for: no delay until the
+        observer has identified one (a push toward safety is not held back on a guess)."""
+        self._braking_sense = Sensing(dead_steps=c.observer_lags if c.observes else 0)
+        """The brake's: until the observer has identified the delay, the longest it can
+        identify (a brake that doubles every step against a delayed actuator reaches the
+        limit before its first force has acted: 1000 N on a 40 kg rover, 0.1 s late)."""
+        self._brake = Brake(c.force_limit, c.hold_stop_time, c.dt, sensing=self._braking_sense)
+        self._keep_off = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time,
+                                 sensing=self.sensing)
+        self._keep_ahead = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time,
+                                   sensing=self.sensing)
         """The keep-off of the obstacle ahead along the velocity (:func:`guard.face_ahead`)."""
         self._braking = False
         """Whether the robot is being braked (a HOLD with ``safe_hold: brake``, or a leg that
@@ -109,6 +119,14 @@ class QLearningController(WeightReadout):
         self.leg_index = -1
         self._t0 = 0.0
         self._prev: tuple[float, Array, Array] | None = None
+        self.observer = (Observer(n, m, c.observer_lags, c.observer_memory, c.observer_ar)
+                         if c.observes else None)
+        """The one-step model the critic learns through (:mod:`observer`); None: the rows take
+        the odometry and the commanded force as they are."""
+        self._segment = 0
+        """Changes with the leg coordinates (a new leg or horizon): the observer's segments."""
+        self._step_id = -1
+        """The observer's id of the step in :attr:`_prev`."""
         self._since_eval = 0
         self.critic_trusted = False
         """Whether the critic's value of the actors' policy is positive (a diagnostic)."""
@@ -160,6 +178,7 @@ class QLearningController(WeightReadout):
         self.leg_index += 1
         self._t0 = float(t)
         self._prev = None
+        self._segment += 1
         self._watch.start(np.asarray(x0_bar, dtype=float), renew,
                           None if moved is None else np.asarray(moved, dtype=float))
         self._held = False   # a brake goes on (:meth:`step`)
@@ -174,9 +193,23 @@ class QLearningController(WeightReadout):
         """
         self._t0 = float(t)
         self._prev = None
+        self._segment += 1
         self._watch.start(np.asarray(x0_bar, dtype=float))
         self._probing_u.follow_line(np.asarray(x0_bar, dtype=float))
         self._held = False
+
+    def set_odometry_variance(self, variance: Array) -> None:
+        """The variance of each state's measurement (the odometry's covariance diagonal).
+
+        The observer smooths the states it learns from with it, and the brake and the
+        keep-offs allow for the velocity's (:class:`guard.Sensing`); zero: exact odometry.
+        """
+        variance = np.asarray(variance, dtype=float)
+        if self.observer is not None:
+            self.observer.variance = variance.copy()
+        velocity = variance[2:2 + self.m]
+        std = float(np.sqrt(velocity.mean())) if velocity.size else 0.0
+        self.sensing.velocity_std = self._braking_sense.velocity_std = std
 
     def completed_leg(self) -> None:
         """Mark the current leg as completed (it entered its window).
@@ -260,7 +293,7 @@ class QLearningController(WeightReadout):
         for keep, obstacle in zip((self._keep_off, self._keep_ahead), obstacles, strict=True):
             if obstacle is not None and x.size >= 2 + self.m:   # it acts within its reach only
                 u = np.clip(keep(u, velocity, obstacle[0], obstacle[1],
-                                 lambda: self._force_scale(self.critic.window.samples()[4])),
+                                 lambda: self._force_scale(self.critic.window.applied())),
                             -limit, limit)
             else:
                 keep.release()
@@ -269,6 +302,8 @@ class QLearningController(WeightReadout):
             self._noise_d = self._probing_d.sample(d_std)
             self._d_out = self._policy_d(phi, x) + self._noise_d
         self._prev = (tau, x, u)  # the applied force: the rows stay right when u saturates
+        if self.observer is not None:
+            self._step_id = self.observer.record(x, u, self._segment)
         events, self._events = self._events, []
         self.info = StepInfo(tau=tau, e_c1=e_c1, e_c2=e_c2, e_a=e_a, e_d=e_d, probing=noise,
                              keep_off=self._keep_off.push + self._keep_ahead.push,
@@ -307,7 +342,7 @@ class QLearningController(WeightReadout):
         e_c2 = -float(sig_f[0] @ theta + k_f[0])
         if tau0 <= 0.0:  # the leg's horizon had passed at the start of this Δt
             return e_c1, e_c2
-        self.critic.window.add_sample(tau0, x0, tau, x, u_app, d_applied)
+        self.critic.window.add_sample(tau0, x0, tau, x, u_app, d_applied, self._step_id)
         if not isinstance(self.critic, LeastSquaresCritic):
             self.critic.update(np.vstack([sig, sig_f]), np.concatenate([k, k_f]))
         self._since_eval += 1
@@ -323,12 +358,17 @@ class QLearningController(WeightReadout):
         says whether the critic's value of the actors' own policy passes the guard's
         test (:meth:`_negative_value_share` within ``value_tolerance``).
         """
+        if self.observer is not None and self.observer.update():
+            window = self.critic.window
+            window.estimate(*self.observer.estimates(window.steps()))
+            assert self.observer.model is not None
+            self.sensing.dead_steps = self._braking_sense.dead_steps = self.observer.model.delay
         if isinstance(self.critic, LeastSquaresCritic):
             self.critic.evaluate(self._rows)
         else:
             self.critic.residual = residual(self._rows, self.critic.window, self.critic.theta)
         self._since_eval = 0
-        share = self._negative_value_share(self.critic.theta, self._Wa, self._Wd)
+        share = self._negative_value_share(self.critic.theta, self._Wa, self._Wd, self.critic.last)
         self.critic_trusted = share <= self.config.value_tolerance
         self.policy_improvement()
 
@@ -375,7 +415,8 @@ class QLearningController(WeightReadout):
                                              f' > {c.max_fit_residual:g}')
             return
         Wa, Wd = self._target
-        tau0, x0, _, _, u_applied, _ = window.samples()
+        tau0, x0, *_ = window.samples()
+        u_applied = window.applied()
         # only where the data are: below the times-to-go the samples cover, the greedy
         # gain is held at its value at their edge (guard.held_below)
         tau_low = float(np.quantile(tau0, c.coverage_quantile))
@@ -392,15 +433,16 @@ class QLearningController(WeightReadout):
         current = np.array([np.linalg.norm(self.gain(t, Wa)) for t in taus])
         s = trust_step(change, current, force / max(scale, 1e-9), c.trust_growth)
         du = float(np.abs(Z @ (greedy_a - Wa)).max(initial=0.0))
-        allowed = max(c.value_tolerance, self._negative_value_share(self.critic.theta, Wa, Wd))
+        allowed = max(c.value_tolerance, self._negative_value_share(self.critic.theta, Wa, Wd,
+                                                                    self.critic.last))
         if du * s > c.force_limit:    # never a change beyond the actuator's range on the data
             s = c.force_limit / du
         why = ''
         for _ in range(4):
             cand = (Wa + s * (greedy_a - Wa), Wd + s * (greedy_d - Wd))
-            theta, residual = fit(partial(self._rows, policy=cand), window,
-                                  self.critic.theta, c.ridge)
-            share = self._negative_value_share(theta, *cand)
+            proposal = fit(partial(self._rows, policy=cand), window, self.critic.theta, c.ridge)
+            theta, residual = proposal.theta, proposal.residual
+            share = self._negative_value_share(theta, *cand, proposal)
             if residual > c.max_fit_residual:
                 why = f'fit residual {residual:.3g} > {c.max_fit_residual:g}'
             elif share > allowed:
@@ -464,7 +506,7 @@ class QLearningController(WeightReadout):
         if brake or (event is PolicyEvent.HOLD and self.config.safe_hold is SafeHold.BRAKE):
             self._braking = True
             self._brake_started, self._brake_until = t, t + self.config.horizon
-            self._brake.start(max(self._force_scale(self.critic.window.samples()[4]), 1.0))
+            self._brake.start(max(self._force_scale(self.critic.window.applied()), 1.0))
             reason += ', braking'
         self._note(event, 'leg diverged: ' + reason)
 

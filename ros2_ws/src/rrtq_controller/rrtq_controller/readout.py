@@ -9,10 +9,12 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import norm
 
 from .basis import QuadraticBasis, TimeBasis
 from .config import ControllerConfig
-from .critic import Critic
+from .critic import Critic, Fit
+from .guard import FALSE_ALARM
 
 Array = NDArray[np.float64]
 
@@ -142,7 +144,8 @@ class WeightReadout:
     def _policy_d(self, phi: Array, x: Array) -> Array:
         return self._Wd.T @ _features(phi, x)
 
-    def _negative_value_share(self, theta: Array, Wa: Array, Wd: Array) -> float:
+    def _negative_value_share(self, theta: Array, Wa: Array, Wd: Array,
+                              fit: Fit | None = None) -> float:
         """The negative part of a policy's value under a critic fit, where the data are.
 
         Every policy's value is positive (M >= 0, P(T) > 0); here (Wa, Wd) under θ, at the
@@ -153,6 +156,12 @@ class WeightReadout:
         sample covers). Positive definiteness of P̂(τ) as a matrix is not asked: the data
         identify some directions (positions) far better than others (velocities, on the
         first legs), and in those the trust region bounds the change instead.
+
+        With ``fit`` (θ's fit, with its spread) only what is negative beyond what noise
+        explains counts: V̂_i + z σ_i, σ_i the standard error of V̂_i (linear in θ) and z
+        the one-sided normal quantile of :data:`guard.FALSE_ALARM`; a value the noise of
+        the data could have made negative is not held against the critic. With exact data
+        σ_i is the fit's own (small) misfit and the share is nearly the plain one.
         """
         tau0, x0, *_ = self.critic.window.samples()
         if not len(tau0):
@@ -163,6 +172,10 @@ class WeightReadout:
         full[:, self.basis.fixed] = self._fixed_w
         z = (phi[:, :, None] * x0[:, None, :]).reshape(len(x0), -1)
         U = np.hstack([x0, z @ Wa] + ([z @ Wd] if self.q else []))
-        value = np.einsum('ij,ij->i', full, U[:, self.basis.rows] * U[:, self.basis.cols])
+        pairs = U[:, self.basis.rows] * U[:, self.basis.cols]
+        value = np.einsum('ij,ij->i', full, pairs)
         total = float(np.sum(np.abs(value)))
+        if fit is not None and fit.spread is not None:
+            g = (phi[:, :, None] * pairs[:, None, self.basis.free]).reshape(len(x0), -1)
+            value = value + float(norm.ppf(1.0 - FALSE_ALARM)) * fit.standard_errors(g)
         return float(np.sum(np.maximum(-value, 0.0))) / total if total > 0 else 1.0

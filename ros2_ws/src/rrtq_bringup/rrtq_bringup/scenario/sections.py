@@ -44,7 +44,7 @@ _SAFETY_KEYS = ('margin', 'confidence', 'window', 'initial_margin', 'calibration
 _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
-    'probing_line_fraction', 'force_limit', 'measured_disturbance', 'model', 'vf_lpc',
+    'probing_line_fraction', 'force_limit', 'measured_disturbance', 'observer', 'model', 'vf_lpc',
 )  # fmt: skip
 # planner key -> the settings dataclass it belongs to
 _PLANNER_KEYS: dict[str, type] = {
@@ -244,8 +244,9 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
         critic_law=_choice(r, data, 'critic_law', ControllerConfig, key),
         actor_law=_choice(r, data, 'actor_law', ControllerConfig, key),
         initial_gain=gain,
-        measured_disturbance=r.boolean(data.get('measured_disturbance', True),
-                                       'controller.measured_disturbance'),
+        **{name: r.boolean(data.get(name, field_default(ControllerConfig, name)),
+                           f'controller.{name}')
+           for name in ('measured_disturbance', 'observer')},
         **weights, **numbers)
 
 

@@ -1,0 +1,331 @@
+"""What the robot can measure, made fit to learn from: a one-step model of its own motion.
+
+The integral Bellman rows (:mod:`bellman`) hold exactly only when every input that moved
+the robot over a step is in them. A robot measures its odometry and knows the forces it
+commanded; it does not measure the wind, a slope, a payload or a tug, its odometry is
+noisy, and its actuator may apply a command a few steps late. Each of these breaks the
+rows, and a least-squares critic fitted to broken rows is biased however much data it
+gets (docs/design.md, "Learning from what a robot can measure"):
+
+* an unmeasured disturbance w enters the Bellman row of the true Q-function as
+  ∫ x̄ᵀ P F w dτ; for a *matched* disturbance (F = B G, a force-like push, as wind, slope
+  and payload are on a wheeled or legged base) that is ∫ x̄ᵀ Q_xu G w dτ, the very term
+  the probing enters the rows by (x̄ᵀ Q_xu (u - û)): if G w were known, adding it to the
+  applied force would make the rows exact again;
+* a delayed actuator applies u_{k-j}, not u_k, over step k;
+* odometry noise puts errors into both sides of the rows (errors in variables).
+
+This module identifies, from odometry and the commanded forces alone (no A, B given), the
+linear one-step model of the robot in its leg coordinates,
+
+    x̄_{k+1} = Φ x̄_k + Σ_{j=0..J} Γ_j u_{k-j} + e_k,
+
+the input lags covering an actuation delay of up to J steps, by least squares with the
+disturbance e modelled as an AR(p) process (iterated Cochrane-Orcutt: a sinusoid is an
+AR(2) process, white noise AR(0), a field the robot drives through nearly AR(2)); without
+the AR part a slow disturbance correlated with the state biases Φ. With odometry noise
+(the covariance the odometry reports), the states are smoothed by a Rauch-Tung-Striebel
+smoother on that model before the identification and before the rows are formed, and the
+model is identified again on the smoothed states at the next evaluation (one EM-like
+pass per evaluation). The critic then learns from the smoothed states and from the
+*equivalent input* of each step,
+
+    u_eff,k = Γ⁺ (x̂_{k+1} - Φ x̂_k),   Γ = Σ_j Γ_j,
+
+the force that explains the step: the applied (possibly delayed) force plus the matched
+part of the disturbance. Only the learning sees the estimates; the robot is controlled
+from its odometry as measured. Beyond the papers (RRT-QX assumes the state measured and
+no disturbance; ACC 2019 assumes the disturbance measured).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.linalg import solve_discrete_are
+
+Array = NDArray[np.float64]
+
+AR_ITERATIONS = 4
+"""Cochrane-Orcutt iterations of :meth:`Observer.identify` (the AR coefficients settle in 2-3)."""
+
+
+@dataclass(frozen=True)
+class OneStepModel:
+    """x̄_{k+1} = Φ x̄_k + Σ_j Γ_j u_{k-j} + e_k, in leg coordinates; e AR(p) with coefficients ``ar``."""
+
+    phi: Array
+    """Φ (n x n)."""
+    gammas: Array
+    """Γ_j (J + 1, n, m): the force of j steps ago."""
+    ar: Array
+    """a_1..a_p of e_k = Σ a_i e_{k-i} + ε_k (common to every state component)."""
+    residual_cov: Array
+    """(n x n): covariance of e, the part of a step the forces and the state do not explain."""
+
+    @property
+    def gamma(self) -> Array:
+        """Γ = Σ_j Γ_j (n x m): the whole effect of a force held over a step."""
+        return np.asarray(self.gammas.sum(axis=0), dtype=float)
+
+    @property
+    def delay(self) -> int:
+        """The lag j (steps) of the largest Γ_j: the actuation delay the data show."""
+        return int(np.argmax(np.linalg.norm(self.gammas, axis=(1, 2))))
+
+    def equivalent_input(self, x0: Array, x1: Array) -> Array:
+        """u_eff = Γ⁺(x̄1 - Φ x̄0) for batches (N, n): the force that explains each step."""
+        return np.asarray(np.linalg.lstsq(self.gamma, (x1 - x0 @ self.phi.T).T, rcond=None)[0].T,
+                          dtype=float)
+
+
+class Observer:
+    """The robot's log of odometry and commands, its one-step model, and smoothed states.
+
+    Parameters
+    ----------
+    n, m
+        State and input dimensions.
+    lags
+        J: input lags of the model (an actuation delay of up to J steps is identified).
+    memory
+        Steps of odometry kept; the model is identified from them.
+    ar
+        p: order of the AR model of the unexplained part of each step.
+    """
+
+    def __init__(self, n: int, m: int, lags: int = 3, memory: int = 4000, ar: int = 2) -> None:
+        self.n, self.m, self.lags, self.ar = n, m, lags, ar
+        self._y = np.zeros((memory, n))
+        self._u = np.zeros((memory, m))
+        self._segment = np.zeros(memory, dtype=np.int64)
+        self.steps = 0
+        """Steps recorded since the start (the id of the next one)."""
+        self.variance = np.zeros(n)
+        """Variance of each state's measurement (the odometry's covariance diagonal)."""
+        self.model: OneStepModel | None = None
+        self._smoothed: Array | None = None
+        self._smoothed_segment = np.zeros(0, dtype=np.int64)
+        self._first = 0
+        """Step id of the first row of :attr:`_smoothed`."""
+
+    @property
+    def memory(self) -> int:
+        """Steps kept."""
+        return len(self._y)
+
+    def record(self, y: Array, u: Array, segment: int) -> int:
+        """Log the measured state y (leg coordinates) and the force commanded after it.
+
+        ``segment`` changes whenever the leg coordinates do (a new leg or horizon): a
+        transition is learned only within one. Returns the step's id.
+        """
+        i = self.steps % self.memory
+        self._y[i], self._u[i], self._segment[i] = y, u, segment
+        self.steps += 1
+        return self.steps - 1
+
+    def _ordered(self) -> tuple[Array, Array, NDArray[np.int64], int]:
+        """(y, u, segment) of the kept steps in time order, and the id of the first."""
+        count = min(self.steps, self.memory)
+        first = self.steps - count
+        idx = (np.arange(count) + first) % self.memory
+        return self._y[idx], self._u[idx], self._segment[idx], first
+
+    # ------------------------------------------------------------ identification
+    def identify(self, x: Array, u: Array, segment: NDArray[np.int64],
+                 ar: int | None = None) -> OneStepModel | None:
+        """The one-step model from states x (raw or smoothed) and forces u in time order.
+
+        Least squares of x̄_{k+1} on (x̄_k, u_k, ..., u_{k-J}) over the transitions within
+        a segment, with e AR(p)-filtered out (Cochrane-Orcutt, :data:`AR_ITERATIONS`
+        times); regressors standardised so that forces (N) and states (m) are alike.
+        None when there are fewer than ten transitions per unknown. ``ar``: p, by default
+        the observer's.
+        """
+        n, m, J = self.n, self.m, self.lags
+        p = self.ar if ar is None else ar
+        lagged = _lagged(u, J)
+        regress = np.hstack([x[:-1], lagged[:-1]])
+        target = x[1:]
+        same = segment[1:] == segment[:-1]
+        usable = same.copy()              # and the p transitions before in the same segment
+        for i in range(1, p + 1):
+            usable[i:] &= same[:-i] & (segment[1 + i:] == segment[1:-i])
+            usable[:i] = False
+        usable[:J] = False                # the lags of the first steps are unknown
+        if usable.sum() < 10 * regress.shape[1]:
+            return None
+        a = np.zeros(p)
+        for _ in range(AR_ITERATIONS if p else 1):
+            w = _least_squares(_ar_filter(regress, a)[usable], _ar_filter(target, a)[usable])
+            if not p:
+                break
+            a = _ar_coefficients(target - regress @ w, usable, p)
+        e = (target - regress @ w)[same]
+        return OneStepModel(phi=w[:n].T.copy(), gammas=w[n:].reshape(J + 1, m, n).transpose(0, 2, 1),
+                            ar=a, residual_cov=np.atleast_2d(np.cov(e.T)))
+
+    def update(self) -> bool:
+        """Identify the model from the kept steps; smooth the states with it if odometry is noisy.
+
+        With noisy odometry the model is identified twice: on the measured states with no
+        AR part (errors in variables bias it, but it never depends on an earlier estimate),
+        then on the states smoothed with that model, with the AR part (on measured states an
+        AR filter close to a difference would amplify the noise it should not see); the
+        states are smoothed again with the second. Returns whether there is a model.
+        """
+        y, u, segment, first = self._ordered()
+        if len(y) < self.lags + self.ar + 2:
+            return self.model is not None
+        model = self.identify(y, u, segment, ar=0 if self.noisy else None)
+        if model is None or not _invertible(model.gamma):
+            return self.model is not None
+        if self.noisy:
+            refined = self.identify(
+                self._smooth(model, self._process_noise(model, y, u, segment), y, u, segment),
+                u, segment)
+            if refined is not None and _invertible(refined.gamma):
+                model = refined
+        self.model = model
+        self._smoothed = (self._smooth(model, self._process_noise(model, y, u, segment), y, u,
+                                       segment)
+                          if self.noisy else y.copy())
+        self._smoothed_segment, self._first = segment.copy(), first
+        return True
+
+    @property
+    def noisy(self) -> bool:
+        """Whether the odometry reports a measurement variance (then states are smoothed)."""
+        return bool(np.any(self.variance > 0.0))
+
+    def estimates(self, steps: NDArray[np.int64]) -> tuple[Array, Array, Array, NDArray[np.bool_]]:
+        """Smoothed x̄ at each step and the next, the equivalent input between, and which exist.
+
+        For transitions whose steps are not both in the last :meth:`update`'s smoothing
+        (too old, or recorded since), or cross a segment, the mask is False.
+        """
+        k = len(steps)
+        x0, x1, u = np.zeros((k, self.n)), np.zeros((k, self.n)), np.zeros((k, self.m))
+        if self.model is None or self._smoothed is None:
+            return x0, x1, u, np.zeros(k, dtype=bool)
+        rel = steps - self._first
+        ok = (rel >= 0) & (rel + 1 < len(self._smoothed))
+        idx = rel[ok]
+        segment = self._smoothed_segment
+        ok[ok] = segment[idx] == segment[idx + 1]
+        idx = rel[ok]
+        x0[ok], x1[ok] = self._smoothed[idx], self._smoothed[idx + 1]
+        u[ok] = self.model.equivalent_input(x0[ok], x1[ok])
+        return x0, x1, u, ok
+
+    # ----------------------------------------------------------------- smoothing
+    def _process_noise(self, model: OneStepModel, y: Array, u: Array,
+                       segment: NDArray[np.int64]) -> Array:
+        """Q = Γ Q_w Γᵀ: the disturbance, matched, as the smoother's process noise.
+
+        Q_w (m x m) is the covariance of the equivalent input disturbance the measured
+        states show, ŵ = Γ⁺ e with e their residuals under the model, less what the
+        measurement noise puts into it (Γ⁺ (R + Φ R Φᵀ) Γ⁺ᵀ: e = n_{k+1} - Φ n_k + Γ w). A
+        difference of two estimates: its eigenvalues are kept at least at the standard
+        error of the first (√(2 / N) of its scale), below which Q_w cannot be told from
+        zero. Positions get no noise of their own: a push moves them only through the
+        velocities (a model that is exact but for the disturbance would need none; the
+        floor leaves room for one that is not quite).
+        """
+        n, J = self.n, self.lags
+        R = np.diag(self.variance)
+        lagged = _lagged(u, J)
+        same = segment[1:] == segment[:-1]
+        same[:J] = False
+        e = (y[1:] - y[:-1] @ model.phi.T - lagged[:-1] @ model.gammas.transpose(0, 2, 1).reshape(-1, n))[same]
+        pinv = np.linalg.pinv(model.gamma)
+        w = e @ pinv.T
+        noise = pinv @ (R + model.phi @ R @ model.phi.T) @ pinv.T
+        Qw = np.atleast_2d(np.cov(w.T)) - noise
+        floor = math.sqrt(2.0 / max(len(w), 1)) * float(np.trace(noise + Qw)) / self.m
+        vals, vecs = np.linalg.eigh(0.5 * (Qw + Qw.T))
+        Qw = (vecs * np.maximum(vals, floor)) @ vecs.T
+        G = model.gamma
+        return np.asarray(G @ Qw @ G.T + 1e-12 * np.eye(n), dtype=float)
+
+    def _smooth(self, model: OneStepModel, Q: Array, y: Array, u: Array,
+                segment: NDArray[np.int64]) -> Array:
+        """Rauch-Tung-Striebel smoothing of every segment with steady-state gains.
+
+        Process noise Q (:meth:`_process_noise`), measurement noise the odometry's
+        variances. Segments are smoothed side by side (one step of every segment per
+        iteration; a segment is at most a horizon long).
+        """
+        n, J = self.n, self.lags
+        R = np.diag(np.maximum(self.variance, 1e-12))
+        Pp = solve_discrete_are(model.phi.T, np.eye(n), Q, R)   # predicted covariance
+        K = Pp @ np.linalg.inv(Pp + R)
+        Pf = (np.eye(n) - K) @ Pp
+        C = Pf @ model.phi.T @ np.linalg.inv(Pp)
+        count = len(y)
+        lagged = _lagged(u, J)
+        drive = lagged @ model.gammas.transpose(0, 2, 1).reshape(-1, n)    # Σ Γ_j u_{k-j}
+        starts = np.flatnonzero(np.r_[True, segment[1:] != segment[:-1]])
+        ends = np.r_[starts[1:], count]
+        longest = int((ends - starts).max())
+        filtered = np.zeros_like(y)
+        predicted = np.zeros_like(y)
+        for k in range(longest):
+            live = starts + k < ends
+            i = starts[live] + k
+            if k == 0:
+                prior = y[i]
+            else:
+                prior = filtered[i - 1] @ model.phi.T + drive[i - 1]
+            predicted[i] = prior
+            filtered[i] = prior + (y[i] - prior) @ K.T
+        smoothed = filtered.copy()
+        for k in range(longest - 2, -1, -1):
+            live = starts + k + 1 < ends
+            i = starts[live] + k
+            smoothed[i] = filtered[i] + (smoothed[i + 1] - predicted[i + 1]) @ C.T
+        return smoothed
+
+
+def _lagged(u: Array, lags: int) -> Array:
+    """(u_k, u_{k-1}, ..., u_{k-J}) for every k (zero before the first), (K, (J + 1) m)."""
+    count = len(u)
+    return np.hstack([np.vstack([np.zeros((min(j, count), u.shape[1])), u[:max(count - j, 0)]])
+                      for j in range(lags + 1)])
+
+
+def _least_squares(regress: Array, target: Array) -> Array:
+    """W of target ≈ regress W, columns standardised, a ridge of 1e-9 per standardised unit."""
+    scale = np.sqrt(np.mean(regress ** 2, axis=0)) + 1e-300
+    z = regress / scale
+    gram = z.T @ z
+    w = np.linalg.solve(gram + 1e-9 * len(z) * np.eye(len(gram)), z.T @ target)
+    return np.asarray(w / scale[:, None], dtype=float)
+
+
+def _ar_filter(z: Array, a: Array) -> Array:
+    """z_k - Σ_i a_i z_{k-i} (the first rows are dropped by the caller's mask)."""
+    out = z.copy()
+    for i, ai in enumerate(a, start=1):
+        out[i:] -= ai * z[:-i]
+    return out
+
+
+def _ar_coefficients(e: Array, usable: NDArray[np.bool_], p: int) -> Array:
+    """The AR coefficients of e_k = Σ a_i e_{k-i} + ε_k, pooled over the components (unit spread each)."""
+    r = e / (e[usable].std(axis=0) + 1e-300)
+    lags = np.stack([np.vstack([np.zeros((i, r.shape[1])), r[:-i]]) for i in range(1, p + 1)],
+                    axis=-1)[usable]
+    gram = np.einsum('kip,kiq->pq', lags, lags)
+    return np.asarray(np.linalg.solve(gram + 1e-9 * np.eye(p), np.einsum('kip,ki->p', lags, r[usable])),
+                      dtype=float)
+
+
+def _invertible(gamma: Array) -> bool:
+    """Whether Γ has full column rank, numerically (every force direction moves the robot)."""
+    s = np.linalg.svd(gamma, compute_uv=False)
+    return bool(s.min() > 1e-6 * s.max())

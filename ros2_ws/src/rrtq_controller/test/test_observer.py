@@ -1,0 +1,148 @@
+"""The observer: a one-step model identified from odometry and forces, smoothing, the equivalent input.
+
+Ground truth: the true plant's exact zero-order-hold discretisation
+(``rrtq_testing.controller_reference``), which the observer never sees.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rrtq_controller.observer import Observer
+from rrtq_testing import controller_reference as ref
+
+DT = 0.05
+F = ref.MAXWELL_SLIP_F
+
+
+def _drive(observer: Observer, *, seconds: float = 150.0, delay: int = 0,
+           disturbance: str = 'none', amplitude: float = 0.5, noise: tuple[float, float] = (0.0, 0.0),
+           mass: float = 40.0, damping: float = 45.0, stiffness: float = 0.0, seed: int = 0):
+    """A PD-held robot with slow probing, legs of 10 s, the observer fed as the controller feeds it.
+
+    Returns the true states, the measured ones, the applied forces and the disturbance
+    (per step), and the true (Φ, Γ).
+    """
+    A, B = ref.rover(mass, stiffness, damping)
+    plant = ref.Plant(A, B, DT, F)
+    Phi, Gam = ref.zoh(A, B, DT)
+    rng = np.random.default_rng(seed)
+    K = np.array([[40.0, 0.0, 30.0, 0.0], [0.0, 40.0, 0.0, 30.0]])
+    a = math.exp(-DT)
+    probe = np.zeros(2)
+    pending = [np.zeros(2)] * delay
+    truth, measured, applied, pushes = [], [], [], []
+    x = np.zeros(4)
+    segment = 0
+    sp, sv = noise
+    for k in range(int(seconds / DT)):
+        if k % 200 == 0:                      # a new leg: a new target 2-8 m away
+            segment += 1
+            x = np.concatenate([ref.random_legs(rng, 1, 2.0, 8.0)[0], x[2:]])
+        y = x + rng.standard_normal(4) * np.array([sp, sp, sv, sv])
+        probe = a * probe + math.sqrt(1 - a * a) * 30.0 * rng.standard_normal(2)
+        u = -K @ y + probe
+        observer.record(y, u, segment)
+        pending.append(u)
+        ua = pending.pop(0)
+        t = k * DT
+        d = {'none': 0.0, 'white': amplitude * rng.standard_normal(),
+             'sinusoid': amplitude * math.sin(2 * math.pi * 0.2 * t)}[disturbance]
+        truth.append(x.copy()), measured.append(y), applied.append(ua), pushes.append(d)
+        x = plant.step(x, ua, np.array([d]))
+    return (np.array(truth), np.array(measured), np.array(applied), np.array(pushes), Phi, Gam)
+
+
+def test_identifies_the_exact_model_and_the_delay_from_exact_data():
+    for delay in (0, 2):
+        obs = Observer(4, 2, lags=3, memory=4000)
+        *_, Phi, Gam = _drive(obs, delay=delay)
+        assert obs.update()
+        model = obs.model
+        assert model is not None
+        assert np.abs(model.phi - Phi).max() < 1e-8
+        assert np.abs(model.gammas[delay] - Gam).max() < 1e-10
+        assert np.abs(np.delete(model.gammas, delay, axis=0)).max() < 1e-10
+        assert model.delay == delay
+
+
+@pytest.mark.parametrize('disturbance', ['white', 'sinusoid'])
+def test_the_model_holds_under_a_disturbance_the_robot_does_not_measure(disturbance):
+    """White: least squares is consistent. A 0.2 Hz sinusoid is AR(2): filtered out.
+
+    Without the AR part the sinusoid, correlated with the state it moved, biases Φ.
+    """
+    obs = Observer(4, 2, lags=3, memory=4000)
+    _, _, _, _, Phi, Gam = _drive(obs, disturbance=disturbance, seconds=200.0)
+    obs.update()
+    model = obs.model
+    assert model is not None
+    # Φ's velocity rows (damping, 1 - c/m Δt) and Γ within 2 %
+    assert np.abs(model.phi[2:] - Phi[2:]).max() < 0.02 * np.abs(Phi[2:]).max()
+    assert np.abs(model.gamma - Gam).max() < 0.02 * np.abs(Gam).max()
+    if disturbance == 'sinusoid':
+        w = 2 * math.pi * 0.2 * DT
+        assert model.ar == pytest.approx([2 * math.cos(w), -1.0], abs=0.02)
+        plain = Observer(4, 2, lags=3, memory=4000, ar=0)
+        _drive(plain, disturbance=disturbance, seconds=200.0)
+        plain.update()
+        assert plain.model is not None
+        assert (np.abs(plain.model.phi[2:] - Phi[2:]).max()
+                > 5 * np.abs(model.phi[2:] - Phi[2:]).max())
+
+
+def test_the_equivalent_input_is_the_applied_force_and_the_matched_push():
+    """u_eff = Γ⁺(x̄_{k+1} - Φ x̄_k): the force applied (delayed) plus m·F d, the push in newtons."""
+    obs = Observer(4, 2, lags=3, memory=4000)
+    truth, _, applied, pushes, _, _ = _drive(obs, disturbance='white', delay=2)
+    obs.update()
+    steps = np.arange(obs.steps - 1500, obs.steps - 1)
+    x0, x1, u, known = obs.estimates(steps)
+    assert known.mean() > 0.95                  # all but the transitions across a leg
+    push = 40.0 * pushes[steps, None] * F[2:, 0][None, :]
+    expected = applied[steps] + push
+    # the model's own estimation error (a white push is noise to least squares) is what
+    # remains: a few % of the push, which the commanded force alone misses whole
+    error = np.sqrt(np.mean((u[known] - expected[known]) ** 2))
+    assert error < 0.05 * np.sqrt(np.mean(push ** 2))
+    assert np.sqrt(np.mean((applied[steps][known] - expected[known]) ** 2)) > 0.9 * np.sqrt(
+        np.mean(push ** 2))
+    assert np.array_equal(x0[known], truth[steps][known])   # exact odometry: no smoothing
+
+
+def test_smoothing_brings_noisy_odometry_closer_to_the_truth():
+    """σ_p = 0.02 m, σ_v = 0.05 m/s with a delay: the smoothed states and the equivalent input.
+
+    The robot learns from these; raw, the equivalent input of one step would carry the
+    velocity noise divided by Δt (m σ_v √2 / Δt ≈ 57 N).
+    """
+    obs = Observer(4, 2, lags=3, memory=4000)
+    obs.variance = np.array([0.02, 0.02, 0.05, 0.05]) ** 2
+    truth, measured, applied, pushes, _, _ = _drive(obs, disturbance='white', delay=2,
+                                                    noise=(0.02, 0.05))
+    assert obs.update()
+    steps = np.arange(obs.steps - 3000, obs.steps - 1)
+    x0, _, u, known = obs.estimates(steps)
+    raw = np.sqrt(np.mean((measured[steps][known] - truth[steps][known]) ** 2, axis=0))
+    smoothed = np.sqrt(np.mean((x0[known] - truth[steps][known]) ** 2, axis=0))
+    assert np.all(smoothed[:2] < 0.5 * raw[:2])     # positions
+    assert np.all(smoothed[2:] < 0.7 * raw[2:])     # velocities
+    push = 40.0 * pushes[steps, None] * F[2:, 0][None, :]
+    error = np.sqrt(np.mean((u[known] - (applied[steps] + push)[known]) ** 2))
+    assert error < 0.5 * 40.0 * 0.05 * math.sqrt(2.0) / DT
+
+
+def test_the_log_keeps_its_memory_and_refuses_to_learn_from_too_little():
+    obs = Observer(4, 2, lags=3, memory=200)
+    assert not obs.update()
+    for k in range(10):
+        obs.record(np.full(4, float(k)), np.zeros(2), 1)
+    assert not obs.update()                     # ten steps: fewer than ten per unknown
+    for k in range(500):
+        obs.record(np.zeros(4), np.zeros(2), 2)
+    assert obs.steps == 510
+    y, *_ = obs._ordered()
+    assert len(y) == 200
