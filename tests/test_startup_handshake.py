@@ -99,13 +99,16 @@ def test_the_graph_gives_each_writer_its_readers_and_the_simulator_their_names(t
     assert set(written) | {topics.CLOCK, topics.ODOM, topics.ODOM_TRUTH} == set(STEP_TOPICS)
 
 
-def test_the_nominal_controller_reads_the_disturbance_unless_told_not_to(tmp_path):
-    """Its critic learns from /disturbance: it subscribes, and the injector waits for it too."""
+def test_the_nominal_controller_reads_the_disturbance_only_when_told_to(tmp_path):
+    """By default the robot side is blind to /disturbance (no robot has it); with
+    ``measured_disturbance: true`` (a robot with a sensor of it) the critic learns from it:
+    it subscribes, and the injector waits for it too."""
     scenario = load_scenario(str(ROOT / 'scenarios' / 'rrtqx_paper.yaml'))
-    blind = dataclasses.replace(scenario, controller=dataclasses.replace(
-        scenario.controller, measured_disturbance=False))
+    assert not scenario.controller.measured_disturbance
+    reads = dataclasses.replace(scenario, controller=dataclasses.replace(
+        scenario.controller, measured_disturbance=True))
     counts = {}
-    for name, s in (('reads', scenario), ('blind', blind)):
+    for name, s in (('reads', reads), ('blind', scenario)):
         specs = {spec.name: spec for spec in build_graph(s, 0.0, str(tmp_path / f'{name}.mcap'))}
         counts[name] = readiness.expectations(
             specs['disturbance_injector'].params[readiness.PARAMETER])[topics.DISTURBANCE]

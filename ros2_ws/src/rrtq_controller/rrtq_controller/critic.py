@@ -8,6 +8,7 @@ terminal row (e_c2, sign flipped to a residual); see :mod:`bellman`.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable
 
@@ -107,9 +108,20 @@ class Fit:
     theta: Array
     residual: float
     """The relative residual √(Σ w e²) / √(Σ w y²) (0 when no data)."""
+    noise: float = 0.0
+    """The part of :attr:`residual` that noise explains: √(N σ̂²) / √(Σ w y²), σ̂² the
+    variance of the weighted residuals √w e of the Bellman rows estimated from their
+    differences :data:`LONG_RUN_LAGS` steps apart in time order (Rice's difference estimator:
+    a critic that cannot represent the Q-function leaves a residual that varies slowly
+    along the trajectory, which differences cancel; noise does not vary slowly)."""
     spread: Array | None = None
     """Σ_θ (p x p): the covariance of θ, a sandwich estimate (heteroscedastic rows) inflated
     by the long-run variance of the residuals in time order; None without data."""
+
+    @property
+    def misfit(self) -> float:
+        """The relative residual less its noise part, √(max(residual² - noise², 0))."""
+        return math.sqrt(max(self.residual ** 2 - self.noise ** 2, 0.0))
 
     def standard_errors(self, g: Array) -> Array:
         """The standard error of gᵀθ for each row g of ``g`` (k, p): √(gᵀ Σ_θ g)."""
@@ -148,8 +160,14 @@ def fit(rows: RowBuilder, window: SampleWindow, prior: Array, ridge: float) -> F
     e = S @ theta - y
     h = S * (w * e)[:, None]
     Ainv = np.linalg.inv(A)
-    spread = Ainv @ (h.T @ h) @ Ainv * _long_run_factor(e[:window.count], window.order())
-    return Fit(theta, _relative_residual(S, y, w, theta), 0.5 * (spread + spread.T))
+    order = window.order()
+    spread = Ainv @ (h.T @ h) @ Ainv * _long_run_factor(e[:window.count], order)
+    r = (np.sqrt(w) * e)[:window.count][order]
+    L = LONG_RUN_LAGS
+    scale = float(np.sqrt(w @ (y * y)))
+    noise = (math.sqrt(len(r) * float(np.mean((r[L:] - r[:-L]) ** 2)) / 2.0) / scale
+             if len(r) > 2 * L and scale > 0 else 0.0)
+    return Fit(theta, _relative_residual(S, y, w, theta), noise, 0.5 * (spread + spread.T))
 
 
 def _long_run_factor(e: Array, order: NDArray[np.intp]) -> float:

@@ -24,19 +24,25 @@ from functools import partial
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.stats import norm
 
 from .basis import QuadraticBasis, TimeBasis
 from .bellman import Policy, bellman_rows
 from .config import ActorLaw, ControllerConfig, SafeHold, StepInfo, Variant
-from .critic import LeastSquaresCritic, fit, make_critic, residual
-from .guard import (Brake, DivergenceWatch, KeepOff, PolicyEvent, Sensing, face_ahead,
-                    held_below, trust_step)
+from .critic import Fit, LeastSquaresCritic, fit, make_critic, residual
+from .guard import (FALSE_ALARM, Brake, DivergenceWatch, KeepOff, PolicyEvent, Sensing,
+                    face_ahead, held_below, trust_step)
 from .observer import Observer
 from .probing import Probing
 from .readout import WeightReadout, _features
 from .stability import gain_warnings
 
 Array = NDArray[np.float64]
+
+
+def _misfit(f: Fit) -> str:
+    """How a fit's residual reads in a rejection: its misfit, and the noise part taken off."""
+    return f'fit residual {f.residual:.3g} (noise {f.noise:.3g}: misfit {f.misfit:.3g})'
 
 
 def _pad(W: Array, rows: int) -> Array:
@@ -367,6 +373,7 @@ class QLearningController(WeightReadout):
             self.critic.evaluate(self._rows)
         else:
             self.critic.residual = residual(self._rows, self.critic.window, self.critic.theta)
+            self.critic.last = Fit(self.critic.theta, self.critic.residual)
         self._since_eval = 0
         share = self._negative_value_share(self.critic.theta, self._Wa, self._Wd, self.critic.last)
         self.critic_trusted = share <= self.config.value_tolerance
@@ -410,9 +417,9 @@ class QLearningController(WeightReadout):
         c, window = self.config, self.critic.window
         if self.leg_index < c.actor_warmup_legs or self._held or window.count == 0:
             return
-        if self.critic.residual > c.max_fit_residual:
-            self._note(PolicyEvent.REJECTED, f'critic: fit residual {self.critic.residual:.3g}'
-                                             f' > {c.max_fit_residual:g}')
+        if self.critic.last.misfit > c.max_fit_residual:
+            self._note(PolicyEvent.REJECTED, f'critic: {_misfit(self.critic.last)} > '
+                                             f'{c.max_fit_residual:g}')
             return
         Wa, Wd = self._target
         tau0, x0, *_ = window.samples()
@@ -441,14 +448,14 @@ class QLearningController(WeightReadout):
         for _ in range(4):
             cand = (Wa + s * (greedy_a - Wa), Wd + s * (greedy_d - Wd))
             proposal = fit(partial(self._rows, policy=cand), window, self.critic.theta, c.ridge)
-            theta, residual = proposal.theta, proposal.residual
+            theta = proposal.theta
             share = self._negative_value_share(theta, *cand, proposal)
-            if residual > c.max_fit_residual:
-                why = f'fit residual {residual:.3g} > {c.max_fit_residual:g}'
+            if proposal.misfit > c.max_fit_residual:
+                why = f'{_misfit(proposal)} > {c.max_fit_residual:g}'
             elif share > allowed:
                 why = f'negative value share {share:.3g} > {allowed:.3g}'
             elif (self._completed is not None and self._full_legs < c.widen_after_legs
-                  and not self._definite_value(theta, *cand)):
+                  and not self._definite_value(proposal, *cand)):
                 why = 'value kernel not positive definite on [T/2, T]'
             else:
                 self._target = (cand[0].copy(), cand[1].copy())
@@ -467,11 +474,23 @@ class QLearningController(WeightReadout):
         pushed = float(np.sqrt(np.mean(u_applied ** 2))) if len(u_applied) else 0.0
         return max(2.0 * self.config.probing_std, pushed)
 
-    def _definite_value(self, theta: Array, Wa: Array, Wd: Array) -> bool:
-        """Whether a policy's value kernel under a critic fit is positive definite on [T/2, T]."""
-        taus = np.linspace(0.5 * self.config.horizon, self.config.horizon, 6)
-        return all(np.linalg.eigvalsh(self.policy_value_kernel(t, theta, Wa, Wd)).min() > 0
-                   for t in taus)
+    def _definite_value(self, proposal: Fit, Wa: Array, Wd: Array) -> bool:
+        """Whether a policy's value kernel under a critic fit is positive definite on [T/2, T].
+
+        Not confidently indefinite: the least eigenvalue λ = vᵀP̂v (v its eigenvector) is
+        linear in θ, and λ + z σ_λ > 0 is asked, σ_λ its standard error under the fit's
+        spread and z the one-sided normal quantile of :data:`guard.FALSE_ALARM`; with exact
+        data σ_λ is the fit's own small misfit and this is λ > 0.
+        """
+        z = float(norm.ppf(1.0 - FALSE_ALARM))
+        for tau in np.linspace(0.5 * self.config.horizon, self.config.horizon, 6):
+            values, vectors = np.linalg.eigh(self.policy_value_kernel(tau, proposal.theta, Wa, Wd))
+            U = self.policy_actions(tau, vectors[:, 0], Wa, Wd)
+            g = 2.0 * (self.time_basis(tau)[:, None] * (U[self.basis.rows] * U[self.basis.cols])
+                       [None, self.basis.free]).ravel()
+            if values[0] + z * float(proposal.standard_errors(g[None])[0]) <= 0.0:
+                return False
+        return True
 
     def revert(self, reason: str, t: float = 0.0, brake: bool = False) -> None:
         """A leg diverged: back to the last policy that completed a leg (or the initial one).

@@ -62,6 +62,14 @@ class WeightReadout:
         P = G.T @ Q @ G
         return 0.5 * (P + P.T)
 
+    def policy_actions(self, tau: float, x: Array, Wa: Array | None = None,
+                       Wd: Array | None = None) -> Array:
+        """U = (x̄, û, d̂) of a policy at x̄ and τ (by default the actors'): Q̂(U) is its value."""
+        parts = [x, -self.gain(tau, self._Wa if Wa is None else Wa) @ x]
+        if self.q:
+            parts.append(self.disturbance_gain(tau, self._Wd if Wd is None else Wd) @ x)
+        return np.concatenate(parts)
+
     def value_kernel(self, tau: float) -> Array:
         """P̂(τ) of V̂ = min_u max_d Q̂ = ½x̄ᵀP̂x̄: Q̂_xx - Q̂_xuR⁻¹Q̂_ux (+ γ⁻² Q̂_xdQ̂_dx)."""
         phi = self.time_basis(tau)

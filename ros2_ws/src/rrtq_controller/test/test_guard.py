@@ -78,7 +78,14 @@ def test_a_forced_bad_critic_update_is_rejected():
     target = ctrl._target[0].copy()
     window = ctrl.critic.window
     glitches = window.count // 10
-    window._x1[:glitches, :2] += np.random.default_rng(0).normal(0.0, 1.0, (glitches, 2))
+    offsets = np.random.default_rng(0).normal(0.0, 1.0, (glitches, 2))
+    # what the robot measured: the window's samples and the observer's log of the same steps
+    for stored in (window._x1, window._measured[1]):
+        stored[:glitches, :2] += offsets
+    observer = ctrl.observer
+    assert observer is not None
+    log = (window.steps()[:glitches] + 1) % observer.memory
+    observer._y[log, :2] += offsets
     rejected = ctrl.event_counts[PolicyEvent.REJECTED]
     ctrl.policy_evaluation()
     assert ctrl.event_counts[PolicyEvent.REJECTED] == rejected + 1
