@@ -9,6 +9,10 @@ import time
 import pytest
 import yaml
 
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+
+from rrtq_bringup.bench_control import control_metrics
 from rrtq_bringup.bench_layouts import LayoutConfig, generate_layout
 from rrtq_bringup.bench_table import aggregate, wilson
 from rrtq_bringup.scenario import load_scenario
@@ -32,6 +36,15 @@ planner: {steer_distance: 3.0, iterations_per_step: 15, max_nodes: 600}
 obstacles:
   - {id: replaced, polygon: [[-1, -1], [1, -1], [1, 1], [-1, 1]]}
 """
+
+
+def _commands(mcap):
+    """Every /cmd_force component of a recording, read with mcap-ros2-support's decoder."""
+    with open(mcap, 'rb') as f:
+        for _schema, _channel, _message, msg in make_reader(
+                f, decoder_factories=[DecoderFactory()]).iter_decoded_messages(topics=['/cmd_force']):
+            yield msg.wrench.force.x
+            yield msg.wrench.force.y
 
 
 def bench(*args, timeout=120):
@@ -72,8 +85,18 @@ def test_two_seeds_table_matches_the_runs(tmp_path, base):
         if summary['success']:
             assert row['path_over_optimum'] == pytest.approx(
                 summary['path_length_m'] / (layout.optimum.length - 0.5))
+        # the controller's figures, read from the run's own recording
+        control = row['control']
+        assert control == control_metrics(runs / f'seed-{seed:03d}')
+        assert control['legs'] > 0 and control['ratio_riccati_policy_last10'] >= 0.9
+        assert control['max_abs_force_n'] == pytest.approx(
+            max(abs(f) for f in _commands(runs / f'seed-{seed:03d}' / 'run.mcap')))
+    assert stats['control']['runs'] == 2
+    assert stats['control']['within_10pct'] == sum(
+        r['control']['ratio_riccati_policy_last10'] <= 1.10 for r in table['runs'])
     md = (out / 'monte_carlo.md').read_text()
     assert f"| success rate | {100 * stats['success_rate']:.0f} %" in md
+    assert 'last-ten leg cost / Riccati policy' in md
     assert f"| collision rate | {100 * stats['collision_rate']:.0f} % |" in md
     assert 'commit ' in md and 'rrtq bench ' in md and 'cores' in md
 

@@ -20,22 +20,18 @@ import json
 import pathlib
 import sys
 
-import numpy as np
-
-from rrtq_bringup.leg_table import leg_table, summary
-from rrtq_bringup.run_data import read_run, recorded_scenario
+from rrtq_bringup.bench_control import control_metrics
 
 
 def seed_row(seed_dir: pathlib.Path) -> dict:
     """The row of one seed's run directory (run.mcap and summary.json), read once."""
-    mcap = seed_dir / 'run.mcap'
     outcome = json.loads((seed_dir / 'summary.json').read_text())['outcome']
-    data = read_run(mcap)
-    events = [e for _, joined, _ in data.policy_events for e in joined.split(';')]
-    ratio = summary(leg_table(data, recorded_scenario(mcap)))['median_ratio_last10']
-    u_max = float(np.abs(data.cmd_u).max(initial=0.0))
-    return {'seed': seed_dir.name, 'outcome': outcome, 'ratio': ratio, 'u_max': u_max,
-            'reverted': events.count('reverted'), 'hold': events.count('hold')}
+    metrics = control_metrics(seed_dir) or {}
+    return {'seed': seed_dir.name, 'outcome': outcome,
+            'ratio': metrics.get('ratio_optimum_last10'),
+            'ratio_riccati': metrics.get('ratio_riccati_policy_last10'),
+            'u_max': metrics.get('max_abs_force_n', 0.0),
+            'reverted': metrics.get('reverts', 0), 'hold': metrics.get('holds', 0)}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -44,9 +40,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument('--label', nargs='+', action='extend', default=[],
                     help='labels of the runs in order (repeat the flag or list them)')
     args = ap.parse_args(argv)
-    print('| configuration | seed | outcome | last-ten leg cost / optimum | max abs(u) N | reverts '
-          '| holds |')
-    print('|---|---|---|---|---|---|---|')
+    print('| configuration | seed | outcome | last-ten leg cost / optimum | last-ten leg cost / '
+          'Riccati policy | max abs(u) N | reverts | holds |')
+    print('|---|---|---|---|---|---|---|---|')
     for i, runs in enumerate(args.runs):
         label = args.label[i] if i < len(args.label) else runs.name
         seeds = sorted(runs.glob('seed-*')) or sorted(runs.glob('*/seed-*'))
@@ -56,7 +52,8 @@ def main(argv: list[str] | None = None) -> int:
         for seed_dir in seeds:
             r = seed_row(seed_dir)
             ratio = '—' if r['ratio'] is None else f"{r['ratio']:.4f}"
-            print(f"| {label} | {r['seed']} | {r['outcome']} | {ratio} | {r['u_max']:.1f} "
+            riccati = '—' if r['ratio_riccati'] is None else f"{r['ratio_riccati']:.4f}"
+            print(f"| {label} | {r['seed']} | {r['outcome']} | {ratio} | {riccati} | {r['u_max']:.1f} "
                   f"| {r['reverted']} | {r['hold']} |", flush=True)
     return 0
 

@@ -34,6 +34,7 @@ from typing import Any
 
 import yaml
 
+from rrtq_bringup.bench_control import evaluate
 from rrtq_bringup.bench_layouts import (Layout, LayoutConfig, LayoutError, generate_layout,
                                         layout_scenario)
 from rrtq_bringup.bench_local import Job, Progress, Scheduler
@@ -44,6 +45,7 @@ from rrtq_bringup.bench_sweep_table import sweep_markdown, sweep_plot
 from rrtq_bringup.bench_table import COMPLETED, aggregate, machine, markdown
 from rrtq_bringup.orchestrator import BadInput, check_supported
 from rrtq_bringup.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
+from rrtq_controller.config import Variant
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 ROOT = pathlib.Path(os.environ.get('RRTQ_ROOT', pathlib.Path(__file__).resolve().parents[4]))
@@ -191,7 +193,7 @@ def _run_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
         engine = {k: row[k] for k in ('attempts', 'retried_after', 'node') if k in row}
         out.append({'seed': row['seed'], 'status': row['status'], 'dir': row['dir'],
                     'optimum_m': row['optimum_m'], 'path_over_optimum': ratio,
-                    **{k: s.get(k) for k in keys}, **engine})
+                    **{k: s.get(k) for k in keys}, 'control': row.get('control'), **engine})
     return out
 
 
@@ -251,6 +253,11 @@ def main(argv: list[str] | None = None) -> int:
               'by each seed\'s layout (--keep-obstacles keeps them)', file=sys.stderr)
     started = time.monotonic()
     rows = sorted(scheduler.run(), key=lambda r: (r['config'], r['seed']))
+    if any(c.scenario.controller.variant in (Variant.NOMINAL, Variant.ROBUST) for c in confs):
+        done = sum(1 for r in rows if r['status'] == COMPLETED)
+        print(f'rrtq bench: reading the legs of {done} recordings (last-ten leg cost against '
+              'the Riccati policy, largest command)', file=sys.stderr)
+        evaluate(rows, args.workers)
     table = {
         'machine': machine(pathlib.Path(__file__).resolve().parent),
         'command': 'rrtq bench ' + shlex.join(argv),

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from rrtq_bringup.bench_table import COMPLETED, cell, num, pct
+from rrtq_bringup.bench_table import COMPLETED, cell, control_cell, num, pct
 
 __all__ = ['sweep_markdown', 'sweep_plot']
 
@@ -26,20 +26,22 @@ def sweep_markdown(table: dict[str, Any]) -> str:
              f"{table['layout']}", '',
              f"Seeds {table['seeds']} for every configuration; engine {table['engine']}; wall "
              f"time {table['wall_s'] / 60.0:.1f} min.", '',
-             '| configuration | runs completed | success (95 % CI) | collisions | time to goal, s '
-             '(median) | path / optimum (median / p95) | controller step, ms (median of '
-             'medians) | replans (median) |',
-             '|---|---|---|---|---|---|---|---|']
+             '| configuration | runs completed | success (95 % CI) | collisions | out of bounds '
+             '| time to goal, s (median) | path / optimum (median / p95) | last-ten leg cost / '
+             'Riccati policy, median (runs within 5 % / 10 %) | largest command / limit | '
+             'controller step, ms (median of medians) | replans (median) |',
+             '|---|---|---|---|---|---|---|---|---|---|---|']
     for conf in table['configurations']:
         s = conf['stats']
         ci = s['success_rate_ci95']
         ci_text = f' ({pct(ci[0])}–{pct(ci[1])})' if ci else ''
         lines.append(
             f"| {cell(conf['label'])} | {s['completed']} of {s['runs']} | "
-            f"{pct(s['success_rate'])}{ci_text} | {s['collisions']} | "
+            f"{pct(s['success_rate'])}{ci_text} | {s['collisions']} | {s.get('out_of_bounds', 0)} | "
             f"{num(s['time_to_goal_s']['median'], 1)} | "
             f"{num(s['path_over_optimum']['median'], 3)} / "
-            f"{num(s['path_over_optimum']['p95'], 3)} | "
+            f"{num(s['path_over_optimum']['p95'], 3)} | {control_cell(s.get('control'))} | "
+            f"{num((s.get('control') or {}).get('max_force_over_limit'), 3)} | "
             f"{num(s['controller_step_ms']['median'], 2)} | {num(s['replans']['median'], 1)} |")
     if table.get('interrupted'):
         lines += ['', f"**Interrupted** ({table['interrupted']}): the table covers the runs "

@@ -20,6 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from rrtq_bringup.bench_control import aggregate_control
+
 __all__ = ['aggregate', 'machine', 'markdown', 'wilson']
 
 COMPLETED = 'completed'
@@ -66,6 +68,7 @@ def aggregate(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
         'success_rate': len(wins) / len(done) if done else None,
         'success_rate_ci95': wilson(len(wins), len(done)),
         'collision_rate': len(crashes) / len(done) if done else None,
+        'out_of_bounds': sum(1 for r in done if r['summary']['outcome'] == 'out_of_bounds'),
         'outcomes': dict(Counter(r['summary']['outcome'] for r in done)),
         'time_to_goal_s': _stats([r['summary']['time_to_goal_s'] for r in wins], 50, 95),
         'path_over_optimum': _stats(ratios, 50, 95),
@@ -82,6 +85,7 @@ def aggregate(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
                              for r in done if not r['summary']['success']],
         'incomplete': [{'seed': r['seed'], 'reason': r['status']}
                        for r in rows if r['status'] != COMPLETED],
+        'control': aggregate_control(done),
     }
 
 
@@ -119,6 +123,26 @@ def pct(value: float | None) -> str:
     return '—' if value is None else f'{100.0 * value:.0f} %'
 
 
+def control_rows(c: dict[str, Any] | None) -> list[tuple[str, str]]:
+    """The controller's lines of the Monte Carlo table (:mod:`rrtq_bringup.bench_control`)."""
+    if c is None:
+        return []
+    return [('last-ten leg cost / Riccati policy through the same disturbance, noise and delay '
+             '(median / p90; runs within 5 %, 10 %)',
+             f"{num(c['ratio_riccati_policy_median'], 3)} / {num(c['ratio_riccati_policy_p90'], 3)}"
+             f"; {c['within_5pct']} and {c['within_10pct']} of {c['runs']}"),
+            ('largest command / actuator limit (runs beyond it)',
+             f"{num(c['max_force_over_limit'], 3)} ({c['beyond_limit']})")]
+
+
+def control_cell(c: dict[str, Any] | None) -> str:
+    """One sweep-table cell: median ratio to the Riccati policy, and runs within 5 % / 10 %."""
+    if c is None:
+        return '—'
+    return (f"{num(c['ratio_riccati_policy_median'], 3)} ({c['within_5pct']} / "
+            f"{c['within_10pct']} of {c['runs']})")
+
+
 def cell(text: str) -> str:
     return text.replace('|', '\\|').replace('\n', ' ')
 
@@ -133,6 +157,7 @@ def markdown(table: dict[str, Any]) -> str:
         ('runs completed', f"{s['completed']} of {s['runs']} (seeds {table['seeds']})"),
         ('success rate', f"{pct(s['success_rate'])}{ci_text}"),
         ('collision rate', pct(s['collision_rate'])),
+        ('out of bounds', str(s.get('out_of_bounds', 0))),
         ('outcomes', ', '.join(f'{k} {v}' for k, v in sorted(s['outcomes'].items())) or '—'),
         ('time to goal, s (median / p95)',
          f"{num(s['time_to_goal_s']['median'], 1)} / {num(s['time_to_goal_s']['p95'], 1)}"),
@@ -144,6 +169,7 @@ def markdown(table: dict[str, Any]) -> str:
          f"{num(s['replan_ms']['median'], 1)} / {num(s['replan_ms']['p95'], 1)}"),
         ('controller step, ms (median of medians / p95 of p95s)',
          f"{num(s['controller_step_ms']['median'])} / {num(s['controller_step_ms']['p95'])}"),
+        *control_rows(s.get('control')),
         ('sim speed-up, sim s per wall s (median)', num(s['sim_speedup']['median'], 2)),
         ('wall time', f"{num(table['wall_s'] / 60.0, 1)} min, engine {engine} "
                       f"(median run {num(s['run_wall_s']['median'], 0)} s)"),
