@@ -155,6 +155,12 @@ class DivergenceWatch:
     """Whether the current leg is no longer than ``deviation`` (watched as its segment)."""
     leg_d0: float = math.inf
     """The current leg's own D0 (the reference's is :attr:`d0`)."""
+    position_std: float = 0.0
+    """σ_p, m per axis of the odometry: the line's limit allows z σ_p more, z the two-sided
+    normal quantile of :data:`FALSE_ALARM` spread over a horizon's steps (a robot exactly on
+    its line that noise alone trips on at most a share α of its legs)."""
+    steps: int = 200
+    """Steps of a horizon (T / Δt), over which :attr:`position_std`'s false alarm is spread."""
 
     def start(self, x0: Array, renew: bool = True, moved: Array | None = None) -> None:
         """A new leg from x̄0; ``renew`` makes it the reference.
@@ -178,7 +184,9 @@ class DivergenceWatch:
         self.leg_d0 = float(np.linalg.norm(x0))
         self.short = float(np.linalg.norm(self.line)) <= self.deviation   # no line at that scale
         coast = float(np.linalg.norm(x0[2:])) * self.stop_time if self.short else 0.0
-        self.line_limit = self.widest + self.deviation + coast
+        # |distance| from the line: two-sided, α spread over the steps of a leg (union bound)
+        noise = float(norm.ppf(1.0 - FALSE_ALARM / (2 * max(self.steps, 1)))) * self.position_std
+        self.line_limit = self.widest + self.deviation + coast + noise
         if not renew and self.d0 > 1e-9:
             if moved is None or self.offset is None:
                 self.offset = None

@@ -98,7 +98,8 @@ class QLearningController(WeightReadout):
         """The actors' weights when a leg last entered its window (the revert point)."""
         self._watch = DivergenceWatch(c.divergence_distance, c.divergence_floor,
                                       c.divergence_speed, c.horizon,
-                                      deviation=c.divergence_deviation, stop_time=c.hold_stop_time)
+                                      deviation=c.divergence_deviation, stop_time=c.hold_stop_time,
+                                      steps=max(int(round(c.horizon / c.dt)), 1))
         self._held = False
         self.sensing = Sensing()
         """Odometry noise and actuation delay the keep-offs allow for: no delay until the
@@ -216,6 +217,7 @@ class QLearningController(WeightReadout):
         velocity = variance[2:2 + self.m]
         std = float(np.sqrt(velocity.mean())) if velocity.size else 0.0
         self.sensing.velocity_std = self._braking_sense.velocity_std = std
+        self._watch.position_std = float(np.sqrt(variance[:2].mean()))
 
     def completed_leg(self) -> None:
         """Mark the current leg as completed (it entered its window).

@@ -9,9 +9,10 @@ import math
 import numpy as np
 
 import pytest
+from scipy.stats import norm
 
 from rrtq_controller.config import ControllerConfig, SafeHold
-from rrtq_controller.guard import (Brake, DivergenceWatch, KeepOff, PolicyEvent, face_ahead,
+from rrtq_controller.guard import (FALSE_ALARM, Brake, DivergenceWatch, KeepOff, PolicyEvent, face_ahead,
                                    held_below, trust_step)
 from rrtq_controller.q_learning import QLearningController
 from rrtq_testing import controller_reference as ref
@@ -634,3 +635,32 @@ def test_a_completed_policy_that_leaves_its_line_twice_is_discarded():
     assert events[:2] == ['reverted', 'hold'], events
     assert not np.allclose(ctrl.gain(T), bad)             # the bad policy is gone
     assert np.linalg.norm(x[:2]) < 10.0                   # kept on the bad policy: metres away
+
+
+def test_the_line_watch_allows_for_the_position_noise_at_its_false_alarm_rate():
+    """The limit off the line grows by z σ_p, z the two-sided quantile of α = 1 % per leg
+    (T / Δt steps). With no tolerance beyond the margin (``deviation`` 0), a robot exactly on
+    its line, seen through odometry of σ_p, trips the watch on nearly every leg without the
+    allowance, and with it on at most α of them."""
+    x0 = np.array([-5.0, 0.0, 0.0, 0.0])
+    exact = DivergenceWatch(2.0, 1.0, 4.0, T, deviation=0.0, steps=200)
+    noisy = DivergenceWatch(2.0, 1.0, 4.0, T, deviation=0.0, steps=200, position_std=0.02)
+    exact.start(x0)
+    noisy.start(x0)
+    z = norm.ppf(1.0 - FALSE_ALARM / 400)
+    assert noisy.line_limit - exact.line_limit == pytest.approx(z * 0.02)
+    rng = np.random.default_rng(0)
+    legs = 500
+    tripped = {'exact': 0, 'noisy': 0}
+    for name, watch in (('exact', exact), ('noisy', noisy)):
+        for _ in range(legs):
+            watch.widest = 0.0            # the margin: no leg before
+            watch.start(x0)
+            for k in range(200):          # on the line, toward the target: only the noise
+                x = np.array([-5.0 + 0.02 * k, 0.0, 0.4, 0.0])
+                x[:2] += rng.normal(0.0, 0.02, 2)
+                if watch.check(x):
+                    tripped[name] += 1
+                    break
+    assert tripped['exact'] > 0.9 * legs
+    assert tripped['noisy'] / legs <= FALSE_ALARM + 5 * np.sqrt(FALSE_ALARM / legs)
