@@ -124,7 +124,7 @@ def build_graph(scenario: Scenario, speed: float, output: str,
         others.append(NodeSpec(
             'safety', 'rrtq_planner.safety_node', 'SafetyNode',
             {**sim_time, **world, **dims, **only(run, 'dt', 'lockstep'),
-             **to_parameters(scenario.safety, exclude=('robot_radius',)),
+             **to_parameters(scenario.safety, exclude=('robot_radius', 'bounds')),
              **to_parameters(scenario.margins)},
             subscribes=clock + (topics.ODOM, topics.PERCEPTION_STATUS,
                                 topics.CONTROLLER_STATE),

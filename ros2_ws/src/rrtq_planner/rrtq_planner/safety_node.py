@@ -47,7 +47,9 @@ class SafetyNode(Node):
         world = load_world(declare_config(self, WorldSource).scenario)
         run = declare_config(self, RunConfig, exclude=('seed',))
         self.dims = declare_config(self, Dimensions)
-        config = declare_config(self, SafetyConfig, robot_radius=world.robot_radius)
+        (x0, x1), (y0, y1) = world.bounds
+        config = declare_config(self, SafetyConfig, robot_radius=world.robot_radius,
+                                bounds=(x0, x1, y0, y1))
         margins = declare_config(self, MarginConfig)
         calibration = read_calibration(margins.calibration).scores if margins.calibration else ()
         self.policy = make_policy(

@@ -243,7 +243,7 @@ def read_planner(r: Reader, raw: Any,
     (x0, x1), (y0, y1) = world.bounds
     planner = PlannerConfig(bounds=(x0, x1, y0, y1), **{
         name: values[name] for name, cls in _PLANNER_KEYS.items() if cls is PlannerConfig})
-    safety = SafetyConfig(robot_radius=world.robot_radius,
+    safety = SafetyConfig(robot_radius=world.robot_radius, bounds=(x0, x1, y0, y1),
                           growth_threshold=values['growth_threshold'])
     return planner, safety, values['goal_tolerance']
 
