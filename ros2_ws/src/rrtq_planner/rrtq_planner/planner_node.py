@@ -1,5 +1,8 @@
 """Planner node: RRT^X on /goal_pose, /odom and /obstacles/augmented; /plan out.
 
+The augmented set's ``margin`` also shrinks the scenario's bounds: the planner's nodes and
+edges lie in the bounds shrunk by it (:class:`rrtq_planner.bounds.Region`).
+
 With ``planner.guidance.mode: gvf`` it also runs the guiding level (VF-LPC §IV-A,
 :class:`rrtq_planner.guidance.GuidanceSession`): the plan is the desired path, the
 augmented obstacles the fields' obstacles, and every cycle's reference trajectory goes
@@ -91,8 +94,10 @@ class PlannerNode(Node):
     def cycle(self, step: Step, budget: Budget) -> None:
         """Repair for obstacle changes, follow the robot, refine, publish."""
         assert self.session is not None
+        augmented = step.get('augmented')
         done = self.session.cycle(step.stamp_ns, conv.odometry_state(step['odom'])[:2],
-                                  conv.changed_obstacles(step.get('augmented')), budget)
+                                  conv.changed_obstacles(augmented), budget,
+                                  None if augmented is None else augmented.margin)
         if done.changed:
             self.plan_pub.publish(conv.path_msg(step.stamp_ns, done.plan.waypoints))
         stats = stats_msg(done)

@@ -170,15 +170,21 @@ def shortest_route(planner: RRTX, start: np.ndarray, shortener: Shortener,
     """The shortest of the shortened candidate routes (the tree path always included).
 
     Routes are taken in the order of :func:`candidate_routes` until
-    ``deadline`` (a ``time.perf_counter()`` value) passes.
+    ``deadline`` (a ``time.perf_counter()`` value) passes.  A start outside the
+    planner's region (within R of the bounds) keeps its leg to the region's
+    nearest point, where the route joins the tree; the rest is shortened, and
+    stays in the region, which is convex.
     """
     best: np.ndarray | None = None
     for route in candidate_routes(planner, start):
         if best is not None and time.perf_counter() >= deadline:
             break
-        if len(route) == 1:  # the robot sits on the goal
+        head = route[:0]
+        if len(route) > 1 and not planner.region.contains(route[0])[0]:
+            head, route = route[:1], route[1:]
+        if len(route) == 1 and len(head) == 0:  # the robot sits on the goal
             route = np.vstack((route, route))
-        short = shortener.simplify(route)
+        short = np.vstack((head, shortener.simplify(route)))
         if best is None or path_length(short) < path_length(best):
             best = short
     assert best is not None

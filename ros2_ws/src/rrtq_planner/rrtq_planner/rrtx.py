@@ -37,12 +37,21 @@ Deliberate deviations, each needed for a property the tests check:
   has stalled short of v_bot (``stall_time``, ``stall_progress``) and sees the
   parent along a free segment: the paper's robot reaches every node it is
   sent to, ours may not (a gust its controller's gain cannot overcome).
+* The free space is bounded by a region, the bounds shrunk by a margin
+  (``robot_radius`` at first, then the margin ``update_obstacles`` is given:
+  the one the obstacles are grown by): samples, steered points and the
+  robot's join point lie in it, and a parent search takes only nodes in it
+  (the goal always).  The region is convex, so every edge between two of its
+  points lies in it without a test; a margin that moves blocks and restores
+  edges as an obstacle does (``rrtx_obstacles``), and a robot outside it is
+  handled in ``rrtx_robot``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .bounds import Region
 from .geometry import ObstacleMap
 from .graph import INF, RRTXGraph
 from .heap import KeyedQueue
@@ -101,10 +110,8 @@ class RRTX(ObstacleMixin, RobotMixin):
         self.index.insert(goal)
         self.graph.g[self.goal] = 0.0
         self.graph.lmc[self.goal] = 0.0
-        x0, x1, y0, y1 = config.bounds
-        rr = config.robot_radius
-        self._lo = np.array([x0 + rr, y0 + rr])
-        self._span = np.array([x1 - x0 - 2 * rr, y1 - y0 - 2 * rr])
+        self.region = Region(config.bounds, config.robot_radius)
+        self._region_blocked = np.zeros(0, dtype=np.intp)
         self._samples = np.zeros((0, 3))
         self._next = 0
         self.radius = config.ball_radius(1)
@@ -150,12 +157,13 @@ class RRTX(ObstacleMixin, RobotMixin):
         is_robot = (
             self.vbot < 0 and robot is not None and row[2] < cfg.robot_sample_probability
         )
+        region = self.region
         if is_robot and robot is not None:
-            point = robot
+            point = region.clamp(robot)     # outside the region: its nearest point (join)
         elif self.vbot >= 0 and row[2] < cfg.path_bias and self._path_length() > 0.0:
             point = self._sample_about_path()
         else:
-            point = self._lo + self._span * row[:2]
+            point = region.lo + region.span * row[:2]
         nearest, dist, near = self.index.nearest_and_near(point, self.radius)
         if dist == 0.0:
             if is_robot:
@@ -165,6 +173,8 @@ class RRTX(ObstacleMixin, RobotMixin):
             # Saturate towards the nearest node (Algorithm 1).
             base = self.graph.pos[nearest]
             point = base + (point - base) * (cfg.steer_distance / dist)
+            # Between two points of the (convex) region; the clip only undoes rounding.
+            point = np.clip(point, region.lo, region.hi)
             is_robot = False
             nearest, dist, near = self.index.nearest_and_near(point, self.radius)
         if (not is_robot and cfg.max_nodes is not None and self.graph.n >= cfg.max_nodes
@@ -209,7 +219,7 @@ class RRTX(ObstacleMixin, RobotMixin):
             k = min(int(np.searchsorted(self._bias_cdf, u)), self._bias_cdf.shape[0] - 1)
             centre = path[k + 1]
         point = centre + _BEND_SPREAD * self.radius * np.array((dx, dy))
-        return np.clip(point, self._lo, self._lo + self._span)
+        return np.clip(point, self.region.lo, self.region.hi)
 
     # ------------------------------------------------------- tree building
     def extend(self, point: np.ndarray, near: np.ndarray) -> int | None:
@@ -258,7 +268,9 @@ class RRTX(ObstacleMixin, RobotMixin):
         """
         gr = self.graph
         ends = gr.pos[near]
+        # ``point`` is in the region, which is convex: a segment to a node in it stays in it.
         free = self.obstacles.segments_free_from(point, ends, start_free=True)
+        free &= self.region.contains(ends) | (near == self.goal)
         if not free.all():
             near = near[free]
             ends = ends[free]

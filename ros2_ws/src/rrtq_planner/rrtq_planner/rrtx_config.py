@@ -47,8 +47,10 @@ class RRTXConfig:
         mu(X_free) in m^2; None uses the area of ``bounds`` (an upper bound,
         which only enlarges the ball).
     robot_radius : float
-        m.  Samples keep this distance from the border of ``bounds``.  Obstacle
-        polygons are expected already grown by it.
+        m.  The nodes keep this distance from the border of ``bounds`` (the
+        region's first margin, until ``update_obstacles`` gives another: see
+        :class:`rrtq_planner.bounds.Region`).  Obstacle polygons are expected
+        already grown by it.
     robot_sample_probability : float
         Probability (0..1) that an iteration samples the robot's position
         while the robot has not yet joined the tree.

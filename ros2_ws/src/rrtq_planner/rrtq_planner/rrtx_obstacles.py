@@ -5,6 +5,12 @@ remembers the edges it blocked, and a block count per edge makes overlapping
 obstacles exact: removing one obstacle restores only the edges that no other
 obstacle blocks.  Edges created while an obstacle exists never cross it
 (they are collision-checked in ``extend``), so that record stays complete.
+
+The region (the bounds shrunk by the margin, :class:`rrtq_planner.bounds.Region`)
+changes like one more obstacle: when the margin moves, the edges with an end
+outside the new region (the goal excepted) are its blocked edges, and those no
+longer outside are restored.  The region is convex and new nodes are placed in
+it, so an edge created while it holds is inside it: that record stays complete too.
 """
 
 from __future__ import annotations
@@ -15,6 +21,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import dijkstra
 
+from .bounds import Region
 from .geometry import segments_hit_polygon
 from .graph import INF
 
@@ -36,8 +43,11 @@ class ObstacleMixin:
     obstacles: ObstacleMap
     radius: float
     vbot: int
+    goal: int
+    region: Region
     _eps: float
     _blocked_by: dict[str, np.ndarray]
+    _region_blocked: np.ndarray
     _orphans: list[int]
 
     if TYPE_CHECKING:  # provided by RRTX / RobotMixin; declared for mypy only
@@ -70,6 +80,7 @@ class ObstacleMixin:
         self,
         added: dict[str, np.ndarray] | None = None,
         removed: list[str] | None = None,
+        margin: float | None = None,
     ) -> None:
         """Algorithm 7: apply vanished, then appeared obstacles, then repair.
 
@@ -77,7 +88,8 @@ class ObstacleMixin:
         as when the safety margin grows): only the edges the old polygon
         blocked and the new one does not are restored (with the vanished
         obstacles), and only the edges the new one blocks and the old one did
-        not are blocked (with the appeared ones).
+        not are blocked (with the appeared ones).  A ``margin`` (m) other than
+        the region's moves the region to the bounds shrunk by it, in the same way.
 
         Raises
         ------
@@ -94,21 +106,28 @@ class ObstacleMixin:
         for oid in removed:
             self.obstacles.remove(oid)
             restored.append(self._unblock(self._blocked_by.pop(oid)))
-        newly: dict[str, np.ndarray] = {}
+        newly: list[np.ndarray] = []
         for oid, polygon in added.items():
             old = self._blocked_by.get(oid)
             hit = self._edges_through(self.obstacles.add(oid, polygon))
             self._blocked_by[oid] = hit
             if old is None:
-                newly[oid] = hit
+                newly.append(hit)
             else:
                 restored.append(self._unblock(np.setdiff1d(old, hit, assume_unique=True)))
-                newly[oid] = np.setdiff1d(hit, old, assume_unique=True)
+                newly.append(np.setdiff1d(hit, old, assume_unique=True))
+        if margin is not None and margin != self.region.margin:
+            old = self._region_blocked
+            self.region = Region(self.config.bounds, margin)
+            hit = self._edges_outside()
+            self._region_blocked = hit
+            restored.append(self._unblock(np.setdiff1d(old, hit, assume_unique=True)))
+            newly.append(np.setdiff1d(hit, old, assume_unique=True))
         if restored:
             self._remove_obstacle(np.concatenate(restored))
             self.reduce_inconsistency()
         if newly:
-            for e in newly.values():
+            for e in newly:
                 self._add_obstacle(e)
             self.propagate_descendants()
             if self.vbot >= 0:
@@ -137,6 +156,14 @@ class ObstacleMixin:
         ]
         hit = segments_hit_polygon(gr.pos[gr.ea[cand]], gr.pos[gr.eb[cand]], poly)
         return np.sort(cand[hit])
+
+    def _edges_outside(self) -> np.ndarray:
+        """Ids (ascending) of the edges with an end outside the region (the goal is inside)."""
+        gr = self.graph
+        inside = self.region.contains(gr.pos[: gr.n])
+        inside[self.goal] = True
+        ne = gr.ne
+        return np.flatnonzero(~(inside[gr.ea[:ne]] & inside[gr.eb[:ne]]))
 
     def _add_obstacle(self, e: np.ndarray) -> None:
         """Algorithm 11: block edges ``e`` (those through a new obstacle), orphan tails."""

@@ -4,6 +4,16 @@ The robot is not a tree node: it sits somewhere on the edge towards v_bot,
 "the next node on its current edge" (Otte & Frazzoli 2016, and the
 reference code's ``moveRobot`` / ``findNewTarget``).  The reported cost is
 g(v_bot) plus the straight distance from the robot to v_bot.
+
+The robot itself may be outside the region (the bounds shrunk by the margin,
+where every node lies): its own segment to v_bot is checked against the
+obstacles only, so a robot the margin grew past, or a gust pushed toward a
+wall, goes on from where it is.  Two cases join it through the nearest point
+of the region instead (beyond the paper): joining the tree from outside the
+region (the point inserted is that nearest point, so no node lies outside),
+and finding itself outside the bounds altogether (blown out): once per such
+excursion that point is inserted and made v_bot, so the plan leads back in by
+the shortest way and then on.
 """
 
 from __future__ import annotations
@@ -16,6 +26,7 @@ from .graph import INF
 from .rrtx_config import PlanStatus
 
 if TYPE_CHECKING:
+    from .bounds import Region
     from .geometry import ObstacleMap
     from .graph import RRTXGraph
     from .neighbors import PointIndex
@@ -31,6 +42,7 @@ class RobotMixin:
     obstacles: ObstacleMap
     radius: float
     goal: int
+    region: Region
 
     if TYPE_CHECKING:  # provided by RRTX; declared for mypy only
 
@@ -44,6 +56,8 @@ class RobotMixin:
         self.robot: np.ndarray | None = None
         self.vbot = -1
         self._robot_edge_free = False
+        self._blown_out = False
+        """The robot was outside the bounds at the last call and has been sent back in."""
         self._progress: tuple[int, float, float] | None = None
         """(v_bot, time s, distance m) when the robot last came closer to v_bot."""
 
@@ -59,12 +73,24 @@ class RobotMixin:
         target is searched for.  With ``t``, v_bot also advances to a parent the
         robot sees when the robot has stalled short of v_bot (``stall_time``,
         ``stall_progress``, counted only while v_bot has a path; beyond the paper).
+        A robot outside the bounds is sent to the nearest point of the region
+        (see the module notes).
         """
         p = np.array(position, dtype=float).reshape(2)
         self.robot = p
         if self.vbot < 0:
             self._connect_robot()
             return
+        x0, x1, y0, y1 = self.config.bounds
+        if not (x0 <= p[0] <= x1 and y0 <= p[1] <= y1):
+            if not self._blown_out:
+                self._blown_out = True
+                v = self._join(self.region.clamp(p))
+                if v >= 0:
+                    self._attach_robot(v)
+                    return
+        else:
+            self._blown_out = False
         gr = self.graph
         tol2 = self.config.reach_tolerance**2
         v = self.vbot
@@ -101,21 +127,28 @@ class RobotMixin:
         return t - last[1] >= self.config.stall_time
 
     def _connect_robot(self) -> None:
-        p = self.robot
-        if p is None:
+        if self.robot is None:
             return
+        v = self._join(self.region.clamp(self.robot))
+        if v >= 0:
+            self._attach_robot(v)
+
+    def _join(self, p: np.ndarray) -> int:
+        """The node at ``p`` (m, in the region), inserted if need be; -1 when it cannot join.
+
+        It joins when it is within delta of the tree, free, and sees a node with a path.
+        """
         nearest, dist, near = self.index.nearest_and_near(p, self.radius)
         if dist == 0.0:
-            self._attach_robot(nearest)
-            return
+            return nearest
         if dist > self.config.steer_distance or not self.obstacles.point_free(p):
-            return
+            return -1
         v = self.extend(p, near)
         if v is None:
-            return
+            return -1
         self.rewire_neighbors(v)
         self.graph.g[v] = self.graph.lmc[v]
-        self._attach_robot(v)
+        return v
 
     def _attach_robot(self, v: int) -> None:
         self.vbot = v

@@ -28,6 +28,8 @@ from rrtq_common.lockstep import OnChange
 from rrtq_common.polygon_set import PolygonSet
 from rrtq_common.settings import check, setting
 
+from .bounds import wall_ahead, wall_distance
+
 Obstacles = list[tuple[str, np.ndarray]]
 
 # m: how far outside a grown obstacle the robot is kept when the margin is capped.
@@ -115,9 +117,6 @@ class SafetyConfig:
     """Parameters of the safety monitor (the margin is the paper's: the running maximum)."""
 
     robot_radius: float = setting(0.0, unit='m', low=0.0, doc='added to every margin')
-    bounds: tuple[float, float, float, float] | None = setting(
-        None, unit='m', doc="the scenario's bounds x_min x_max y_min y_max (learned_bound "
-        'learns its field on them; None: none given, which learned_bound refuses)')
     growth_threshold: float = setting(0.05, unit='m', low=0.0, doc='the augmented set is '
                                       'republished when the margin has changed (grown, or '
                                       'shrunk under safety.margin conformal or learned_bound) '
@@ -125,6 +124,10 @@ class SafetyConfig:
     look_ahead: float = setting(5.0, unit='m', low=0.0, doc='how far along the robot\'s '
                                 'velocity the first detected obstacle it would meet is looked '
                                 'for (/safety/status ahead_distance; 0: not)')
+    bounds: tuple[float, float, float, float] | None = setting(
+        None, unit='m', doc="the scenario's bounds x_min x_max y_min y_max: an obstacle the "
+        "robot's disc keeps inside (nearest and ahead), and where learned_bound learns its "
+        'field; None: none given (learned_bound refuses it)')
 
     def __post_init__(self) -> None:
         check(self)
@@ -176,15 +179,16 @@ class SafetyStep:
     """m, robot radius included: each obstacle's own margin when the policy gives one."""
     obstacle_distance: float = math.inf
     """m, from the robot's disc to the nearest *detected* obstacle (the robot's map, not
-    the truth; < 0: overlap; inf: none): what the controller's keep-off acts on."""
+    the truth), or to the bounds' edges when they are nearer (< 0: overlap; inf: none):
+    what the controller's keep-off acts on."""
     obstacle_direction: tuple[float, float] = (0.0, 0.0)
     """Unit vector from that obstacle's nearest point to the robot (zero when none, or
-    when the robot's centre is inside it)."""
+    when the robot's centre is inside it); for the bounds, the way back inside."""
     ahead_distance: float = math.inf
     """m the robot's disc travels along its velocity before it meets a detected obstacle
-    (inf: none within ``look_ahead``, or at rest; 0: overlapping one already): the
-    obstacle the robot heads for, which need not be the nearest (Nav2's collision monitor
-    looks along the velocity in the same way)."""
+    or the bounds' edges (inf: none within ``look_ahead``, or at rest; 0: overlapping one
+    already): the obstacle the robot heads for, which need not be the nearest (Nav2's
+    collision monitor looks along the velocity in the same way)."""
     ahead_direction: tuple[float, float] = (0.0, 0.0)
     """Unit normal, toward the robot, of that obstacle's boundary where the disc meets it
     (zero when there is none)."""
@@ -354,6 +358,16 @@ class SafetyMonitor:
         self.collided = self.collided or new_collision
         ahead, normal = (math.inf, (0.0, 0.0)) if velocity is None else obstacle_ahead(
             p, velocity, self._swept, self.config.look_ahead)
+        if self.config.bounds is not None:
+            # The boundary is an obstacle too, known from the start (rrtq_planner.bounds).
+            wall, inward = wall_distance(p, self.config.bounds, self.config.robot_radius)
+            if wall < near:
+                near, direction = wall, inward
+            if velocity is not None:
+                reach, facing = wall_ahead(p, velocity, self.config.bounds,
+                                           self.config.robot_radius, self.config.look_ahead)
+                if reach < ahead:
+                    ahead, normal = reach, facing
         return SafetyStep(
             augmented=augmented, augmented_stamp_ns=self._augmented_stamp, d_rob=self.d_rob,
             d_rob_max=self.d_rob_max, margin=self.margin, clearance=float(near),

@@ -125,20 +125,25 @@ class PlannerSession:
     def goal(self) -> np.ndarray:
         return np.asarray(self.planner.config.goal, dtype=float)
 
-    def set_obstacles(self, obstacles: Mapping[str, np.ndarray]) -> bool:
+    def set_obstacles(self, obstacles: Mapping[str, np.ndarray],
+                      margin: float | None = None) -> bool:
         """Make the planner's obstacle set equal to ``obstacles`` (id -> polygon).
 
         Only the differences are repaired: ids that went away are removed, new ids and
-        ids whose polygon changed (grown by a larger margin, say) are (re)added.
-        Returns True when anything changed (a replan).
+        ids whose polygon changed (grown by a larger margin, say) are (re)added. A
+        ``margin`` (m, what the set was grown by) shrinks the bounds by as much: the
+        planner's region (:class:`rrtq_planner.bounds.Region`). Returns True when
+        anything changed (a replan).
         """
         removed = [oid for oid in self._obstacles if oid not in obstacles]
         changed = {oid: np.asarray(poly, dtype=float) for oid, poly in obstacles.items()
                    if oid not in self._obstacles
                    or not np.array_equal(self._obstacles[oid], poly)}
-        if not removed and not changed:
+        if margin == self.planner.region.margin:
+            margin = None
+        if not removed and not changed and margin is None:
             return False
-        self.planner.update_obstacles(added=changed, removed=removed)
+        self.planner.update_obstacles(added=changed, removed=removed, margin=margin)
         for oid in removed:
             del self._obstacles[oid]
         self._obstacles.update(changed)
@@ -173,12 +178,15 @@ class PlannerSession:
 
     def cycle(self, stamp_ns: int, position: np.ndarray,
               obstacles: OnChange[Iterable[tuple[str, np.ndarray]]] | None,
-              budget: Budget) -> Cycle:
-        """Repair for an obstacle set that changed, follow the robot, refine, take the plan."""
+              budget: Budget, margin: float | None = None) -> Cycle:
+        """Repair for an obstacle set that changed, follow the robot, refine, take the plan.
+
+        ``margin`` (m): what that set was grown by, the bounds' shrink (None: unchanged).
+        """
         if obstacles is not None and obstacles.stamp_ns != self._obstacles_stamp:
             self._obstacles_stamp = obstacles.stamp_ns
             start = self._clock()
-            if self.set_obstacles(dict(obstacles.read())):
+            if self.set_obstacles(dict(obstacles.read()), margin):
                 self._repair_ms = (self._clock() - start) * 1e3
         self.set_robot(position, stamp_ns * 1e-9)
         start = self._clock()
