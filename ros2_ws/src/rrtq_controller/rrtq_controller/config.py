@@ -185,6 +185,15 @@ class ControllerConfig:
     """:mod:`rrtq_controller.observer`. Without it an unmeasured disturbance, odometry noise or
     an actuation delay biases the critic's rows and the guard rejects every proposal (the
     rover without a spring under 0.5 m/s² of white noise held the zero gain for 400 s)."""
+    disturbance_estimate: bool = setting(False, doc='robust variant: play the game against '
+                                         'the disturbance the observer estimates (the matched '
+                                         'push, in N per input), not the measured '
+                                         '/disturbance (the paper assumes it measured); gamma '
+                                         'then in cost units per N')
+    """ACC 2019 learns the game from the disturbance that acted, measured. A robot that does
+    not measure its disturbance can play against the equivalent input disturbance its
+    observer identifies (:meth:`rrtq_controller.observer.Observer.acted`): m components, in
+    the units of the forces, entering where the forces do (a matched disturbance)."""
     observer_lags: int = setting(3, low=0, doc='observer: input lags of the one-step model '
                                  '(steps); an actuation delay of up to this many steps is '
                                  'identified')
@@ -307,15 +316,20 @@ class ControllerConfig:
     def reads_disturbance(self) -> bool:
         """Whether the controller learns from the measured disturbance (/disturbance).
 
-        The robust variant always (the game's rows); the nominal one unless
-        ``measured_disturbance`` is false.
+        The robust variant unless it plays against the observer's estimate
+        (``disturbance_estimate``); the nominal one when ``measured_disturbance``.
         """
-        return self.variant is Variant.ROBUST or (self.variant is Variant.NOMINAL
-                                                  and self.measured_disturbance)
+        return ((self.variant is Variant.ROBUST and not self.disturbance_estimate)
+                or (self.variant is Variant.NOMINAL and self.measured_disturbance))
 
     @property
     def observes(self) -> bool:
-        """Whether the critic learns through the observer (nominal, disturbance not read)."""
+        """Whether the critic learns through the observer.
+
+        Nominal: when the disturbance is not read; robust: when it is estimated.
+        """
+        if self.variant is Variant.ROBUST:
+            return self.disturbance_estimate
         return self.observer and self.variant is Variant.NOMINAL and not self.measured_disturbance
 
     @property

@@ -76,15 +76,19 @@ class SampleWindow:
         """The observer's step id of each stored sample's first end (the order of :meth:`samples`)."""
         return self._step[:self.count]
 
-    def estimate(self, x0: Array, x1: Array, u: Array, known: NDArray[np.bool_]) -> None:
+    def estimate(self, x0: Array, x1: Array, u: Array, known: NDArray[np.bool_],
+                 d: Array | None = None) -> None:
         """Learn from these states and inputs where ``known``, from the measured ones elsewhere.
 
-        Arrays in the order of :meth:`samples`.
+        Arrays in the order of :meth:`samples`; ``d``: the disturbance too (a game against
+        an estimated one), where ``known`` (elsewhere it stays as stored).
         """
         c = self.count
         for learned, measured, value in zip((self._x0, self._x1, self._u), self._measured,
                                             (x0, x1, u), strict=True):
             learned[:c] = np.where(known[:, None], value, measured[:c])
+        if d is not None:
+            self._d[:c] = np.where(known[:, None], d, self._d[:c])
 
 
 def _system(rows: RowBuilder, window: SampleWindow) -> tuple[Array, Array, Array]:

@@ -108,6 +108,7 @@ class Observer:
         """Variance of each state's measurement (the odometry's covariance diagonal)."""
         self.model: OneStepModel | None = None
         self._smoothed: Array | None = None
+        self._acted = np.zeros((0, m))
         self._smoothed_segment = np.zeros(0, dtype=np.int64)
         self._first = 0
         """Step id of the first row of :attr:`_smoothed`."""
@@ -194,6 +195,9 @@ class Observer:
         self._smoothed = (self._smooth(model, self._process_noise(model, y, u, segment), y, u,
                                        segment)
                           if self.noisy else y.copy())
+        # the force that acted over each step, as the model sees it: Γ⁺ Σ_j Γ_j u_{k-j}
+        drive = _lagged(u, self.lags) @ model.gammas.transpose(0, 2, 1).reshape(-1, self.n)
+        self._acted = np.asarray(np.linalg.lstsq(model.gamma, drive.T, rcond=None)[0].T, dtype=float)
         self._smoothed_segment, self._first = segment.copy(), first
         return True
 
@@ -221,6 +225,17 @@ class Observer:
         x0[ok], x1[ok] = self._smoothed[idx], self._smoothed[idx + 1]
         u[ok] = self.model.equivalent_input(x0[ok], x1[ok])
         return x0, x1, u, ok
+
+    def acted(self, steps: NDArray[np.int64], known: NDArray[np.bool_]) -> Array:
+        """The commanded force that acted over each step (delayed as the model sees it).
+
+        Γ⁺ Σ_j Γ_j u_{k-j}, where ``known`` (:meth:`estimates`' mask); the equivalent input
+        less this is the matched push, ŵ (N): what a game against the disturbance learns
+        from when the robot does not measure it.
+        """
+        out = np.zeros((len(steps), self.m))
+        out[known] = self._acted[steps[known] - self._first]
+        return out
 
     # ----------------------------------------------------------------- smoothing
     def _process_noise(self, model: OneStepModel, y: Array, u: Array,

@@ -72,7 +72,10 @@ class QLearningController(WeightReadout):
         """Attenuation level γ of the game (0 in the nominal variant: d, measured or not, is no
         input it chooses and carries no cost)."""
         # the nominal variant's measured disturbance enters the critic's rows with d̂ = 0
-        self.n, self.m, self.q = n, m, (q if self.config.reads_disturbance else 0)
+        # robust on the observer's estimate: the game is against the matched push, per input
+        estimated = self.robust and self.config.disturbance_estimate
+        self.n, self.m = n, m
+        self.q = m if estimated else (q if self.config.reads_disturbance else 0)
         self.time_basis = TimeBasis(self.config.time_rates, self.config.time_powers, self.config.horizon)
         self.basis = QuadraticBasis(n, m, self.q)
         L, b = self.time_basis.size, self.basis
@@ -292,7 +295,7 @@ class QLearningController(WeightReadout):
         tau = self.time_to_go(t)
         e_c1 = e_c2 = 0.0
         if self._prev is not None:
-            measured = d_applied is not None and self.q > 0
+            measured = d_applied is not None and self.q > 0 and self.config.reads_disturbance
             d_prev = np.asarray(d_applied, dtype=float) if measured else self._d_out
             e_c1, e_c2 = self.critic_update(tau, x, d_prev)
         reason = self._watch.check(x)
@@ -387,7 +390,13 @@ class QLearningController(WeightReadout):
         """
         if self.observer is not None and self.observer.update():
             window = self.critic.window
-            window.estimate(*self.observer.estimates(window.steps()))
+            steps = window.steps()
+            x0, x1, u, known = self.observer.estimates(steps)
+            if self.robust:      # the game's player d: the push; u: the force that acted
+                acted = self.observer.acted(steps, known)
+                window.estimate(x0, x1, acted, known, u - acted)
+            else:
+                window.estimate(x0, x1, u, known)
             assert self.observer.model is not None
             self.sensing.dead_steps = self._braking_sense.dead_steps = self.observer.model.delay
         if isinstance(self.critic, LeastSquaresCritic):

@@ -220,3 +220,35 @@ def test_runs_repeat_exactly_with_the_same_rng():
     b, rb = _learn(NOSPRING, 0.0, 0.02 * np.eye(2), 2, seed=4)
     assert np.array_equal(a.critic_weights, b.critic_weights)
     assert [r.cost for r in ra] == [r.cost for r in rb]
+
+
+def test_the_robust_game_on_the_observers_estimate_of_the_disturbance():
+    """``disturbance_estimate``: the game learned from the push the observer estimates.
+
+    A push the robot does not measure (white, 20 N per axis, where the forces push: F = B)
+    acts on it; the game's disturbance player is the controller's virtual adversary, off
+    policy. From its odometry and its commands the controller's disturbance actor converges
+    to the game's γ⁻²FᵀP(τ) and its control gain to the game's R⁻¹BᵀP(τ). (A disturbance
+    that is a feedback of the state, such as the adversary's own played back, cannot be told
+    from the plant's dynamics by odometry and forces alone: it is learned from a push that
+    is not.)
+    """
+    A, B = ref.rover(stiffness=0.0)
+    R, F = 0.02 * np.eye(2), B
+    gamma = 1.5 * ref.game_gamma_bound(A, B, M, R, P_T, T, F)
+    cfg = dataclasses.replace(_robust_cfg(gamma), disturbance_estimate=True)
+    assert not cfg.reads_disturbance and cfg.observes
+    rng = np.random.default_rng(4)
+
+    def push(_tau, _x):
+        return 20.0 * rng.standard_normal(2)
+    robust = QLearningController(cfg, 4, 2, 2, np.random.default_rng(0))
+    ref.run_legs(robust, A, B, M, R, P_T, T, DT, ref.random_legs(np.random.default_rng(1000), 16),
+                 cfg.rho, F=F, disturbance=push)
+    assert robust.q == 2 and robust.observer is not None
+    Pg = ref.riccati(A, B, M, R, P_T, T, F, gamma)
+    for tau in (10.0, 7.0):
+        L_star = gamma**-2 * F.T @ Pg(tau)
+        K_star = np.linalg.solve(R, B.T @ Pg(tau))
+        assert np.linalg.norm(robust.disturbance_gain(tau) - L_star) < 0.1 * np.linalg.norm(L_star)
+        assert np.linalg.norm(robust.gain(tau) - K_star) < 0.1 * np.linalg.norm(K_star)

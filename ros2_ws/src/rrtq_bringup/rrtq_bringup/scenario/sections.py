@@ -44,7 +44,8 @@ _SAFETY_KEYS = ('margin', 'confidence', 'window', 'initial_margin', 'calibration
 _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
-    'probing_line_fraction', 'force_limit', 'measured_disturbance', 'observer', 'model', 'vf_lpc',
+    'probing_line_fraction', 'force_limit', 'measured_disturbance', 'observer',
+    'disturbance_estimate', 'model', 'vf_lpc',
 )  # fmt: skip
 # planner key -> the settings dataclass it belongs to
 _PLANNER_KEYS: dict[str, type] = {
@@ -246,7 +247,7 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
         initial_gain=gain,
         **{name: r.boolean(data.get(name, field_default(ControllerConfig, name)),
                            f'controller.{name}')
-           for name in ('measured_disturbance', 'observer')},
+           for name in ('measured_disturbance', 'observer', 'disturbance_estimate')},
         **weights, **numbers)
 
 
