@@ -161,8 +161,7 @@ class ControllerConfig:
     probing_std: float = setting(20.0, unit='N', low=0.0, doc='standard deviation of the '
                                  'control probing noise on the first leg')
     probing_decay: float = setting(0.85, low=0.0, low_open=True, high=1.0, doc='factor '
-                                   'applied to the probing standard deviation after every leg in '
-                                   'which a policy was adopted (and every warm-up leg)')
+                                   'applied to the probing standard deviation after every leg')
     probing_floor: float = setting(0.0, unit='N', low=0.0,
                                    doc='lower bound of the probing standard deviation')
     probing_correlation: float = setting(1.0, unit='s', low=0.0, doc='correlation time of the '

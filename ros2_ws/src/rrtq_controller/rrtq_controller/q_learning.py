@@ -127,10 +127,6 @@ class QLearningController(WeightReadout):
         self.event_counts = {e: 0 for e in PolicyEvent}
         """How often each :class:`guard.PolicyEvent` happened."""
         self.leg_index = -1
-        self._probed_legs = 0
-        """Legs after which the probing decayed: those in which a policy was adopted (and
-        the warm-up's), see :attr:`probing_std`."""
-        self._adopted_in_leg = False
         self._t0 = 0.0
         self._prev: tuple[float, Array, Array] | None = None
         self.observer = (Observer(n, m, c.observer_lags, c.observer_memory, c.observer_ar)
@@ -170,10 +166,6 @@ class QLearningController(WeightReadout):
         watch measures from the reference leg's target, :class:`guard.DivergenceWatch`).
         """
         renew = True   # a fresh divergence reference: first leg, completed leg, a revert
-        if self.leg_index >= 0 and (self._adopted_in_leg
-                                    or self.leg_index < self.config.actor_warmup_legs):
-            self._probed_legs += 1       # the probing has done its work on that leg
-        self._adopted_in_leg = False
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
             entered = not ran_out if completed is None else completed
@@ -244,20 +236,9 @@ class QLearningController(WeightReadout):
 
     @property
     def probing_std(self) -> float:
-        """Current control probing standard deviation, N.
-
-        It decays by ``probing_decay`` after every leg in which the guard adopted a policy
-        (and after each warm-up leg), not after every leg: while the critic's proposals are
-        rejected, the data have not identified it yet, and the probing that identifies
-        Q̂_xu stays (excitation until identified, beyond the papers). On the heavy, lightly
-        damped rover (120 kg, 8 kg/s, a 15 s time constant), whose proposals were rejected
-        leg after leg while the probing decayed to a newton, legs 21-30 within 5 % of the
-        Riccati policy on 13 of 16 random missions instead of 10 (offline, legs cut short
-        by new plans as in the closed loop); where every leg adopts (the 40 kg rover) it is
-        the decay per leg of before.
-        """
+        """Current control probing standard deviation, N (decays per leg)."""
         c = self.config
-        return max(c.probing_std * c.probing_decay ** self._probed_legs, c.probing_floor)
+        return max(c.probing_std * c.probing_decay ** max(self.leg_index, 0), c.probing_floor)
 
     # ---------------------------------------------------------------- step
     def step(self, t: float, x_bar: Array, d_applied: Array | None = None,
@@ -328,7 +309,7 @@ class QLearningController(WeightReadout):
             else:
                 keep.release()
         if self.robust:
-            d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self._probed_legs
+            d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.leg_index
             self._noise_d = self._probing_d.sample(d_std)
             self._d_out = self._policy_d(phi, x) + self._noise_d
         self._prev = (tau, x, u)  # the applied force: the rows stay right when u saturates
@@ -489,7 +470,7 @@ class QLearningController(WeightReadout):
                 why = 'value kernel not positive definite on [T/2, T]'
             else:
                 self._target = (cand[0].copy(), cand[1].copy())
-                self._adopted_since = self._adopted_in_leg = True
+                self._adopted_since = True
                 self._note(PolicyEvent.ADOPTED, f'step {s:.3g} of the greedy change')
                 return
             s *= 0.5
