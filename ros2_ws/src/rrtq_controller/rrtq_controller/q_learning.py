@@ -490,8 +490,13 @@ class QLearningController(WeightReadout):
 
         Not confidently indefinite: the least eigenvalue λ = vᵀP̂v (v its eigenvector) is
         linear in θ, and λ + z σ_λ > 0 is asked, σ_λ its standard error under the fit's
-        spread and z the one-sided normal quantile of :data:`guard.FALSE_ALARM`; with exact
-        data σ_λ is the fit's own small misfit and this is λ > 0.
+        spread and z the one-sided normal quantile of :data:`guard.FALSE_ALARM`: a proposal
+        whose value is definite is rejected by noise with probability at most α. Where the
+        data identify a direction poorly σ_λ is large and this passes more than λ > 0 did:
+        on the heavy rover (120 kg, 8 kg/s), offline, 10 of 16 missions ended within 5 % of
+        the Riccati policy against 13 with λ > 0 and 12 with λ - z σ_λ > 0 (shown definite);
+        under odometry noise, a delay and a sinusoid both of those held the learner back
+        (last ten 1.15-1.44 against 1.01-1.04), and this is kept.
         """
         z = float(norm.ppf(1.0 - FALSE_ALARM))
         for tau in np.linspace(0.5 * self.config.horizon, self.config.horizon, 6):
