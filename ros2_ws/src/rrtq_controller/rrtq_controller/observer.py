@@ -76,6 +76,12 @@ class OneStepModel:
         """The lag j (steps) of the largest Γ_j: the actuation delay the data show."""
         return int(np.argmax(np.linalg.norm(self.gammas, axis=(1, 2))))
 
+    def forced(self, u: Array) -> Array:
+        """Σ_j Γ_j u_{k-j} for every step k of forces u in time order (zero before the first)."""
+        lags = self.gammas.shape[0] - 1
+        return np.asarray(_lagged(u, lags) @ self.gammas.transpose(0, 2, 1).reshape(-1, self.phi.shape[0]),
+                          dtype=float)
+
     def equivalent_input(self, x0: Array, x1: Array) -> Array:
         """u_eff = Γ⁺(x̄1 - Φ x̄0) for batches (N, n): the force that explains each step."""
         return np.asarray(np.linalg.lstsq(self.gamma, (x1 - x0 @ self.phi.T).T, rcond=None)[0].T,
@@ -196,8 +202,8 @@ class Observer:
                                        segment)
                           if self.noisy else y.copy())
         # the force that acted over each step, as the model sees it: Γ⁺ Σ_j Γ_j u_{k-j}
-        drive = _lagged(u, self.lags) @ model.gammas.transpose(0, 2, 1).reshape(-1, self.n)
-        self._acted = np.asarray(np.linalg.lstsq(model.gamma, drive.T, rcond=None)[0].T, dtype=float)
+        self._acted = np.asarray(np.linalg.lstsq(model.gamma, model.forced(u).T, rcond=None)[0].T,
+                                 dtype=float)
         self._smoothed_segment, self._first = segment.copy(), first
         return True
 
@@ -251,12 +257,11 @@ class Observer:
         velocities (a model that is exact but for the disturbance would need none; the
         floor leaves room for one that is not quite).
         """
-        n, J = self.n, self.lags
+        n = self.n
         R = np.diag(self.variance)
-        lagged = _lagged(u, J)
         same = segment[1:] == segment[:-1]
-        same[:J] = False
-        e = (y[1:] - y[:-1] @ model.phi.T - lagged[:-1] @ model.gammas.transpose(0, 2, 1).reshape(-1, n))[same]
+        same[:self.lags] = False
+        e = (y[1:] - y[:-1] @ model.phi.T - model.forced(u)[:-1])[same]
         pinv = np.linalg.pinv(model.gamma)
         w = e @ pinv.T
         noise = pinv @ (R + model.phi @ R @ model.phi.T) @ pinv.T
@@ -275,15 +280,14 @@ class Observer:
         variances. Segments are smoothed side by side (one step of every segment per
         iteration; a segment is at most a horizon long).
         """
-        n, J = self.n, self.lags
+        n = self.n
         R = np.diag(np.maximum(self.variance, 1e-12))
         Pp = solve_discrete_are(model.phi.T, np.eye(n), Q, R)   # predicted covariance
         K = Pp @ np.linalg.inv(Pp + R)
         Pf = (np.eye(n) - K) @ Pp
         C = Pf @ model.phi.T @ np.linalg.inv(Pp)
         count = len(y)
-        lagged = _lagged(u, J)
-        drive = lagged @ model.gammas.transpose(0, 2, 1).reshape(-1, n)    # Σ Γ_j u_{k-j}
+        drive = model.forced(u)
         starts = np.flatnonzero(np.r_[True, segment[1:] != segment[:-1]])
         ends = np.r_[starts[1:], count]
         longest = int((ends - starts).max())
