@@ -263,6 +263,9 @@ class Sensing:
     """σ_v, m/s per axis."""
     dead_steps: int = 0
     """Steps a commanded force takes to act."""
+    step_gain: float = 0.0
+    """m/s per N: the most a force held over one step changes the velocity (the velocity
+    rows of the observer's Γ, its largest singular value); 0: not known yet."""
 
     @property
     def lag(self) -> int:
@@ -275,13 +278,21 @@ class Sensing:
         return float(norm.ppf(1.0 - FALSE_ALARM)) * math.sqrt(2.0) * self.velocity_std
 
     def rest(self, floor: float) -> float:
-        """m/s: the speed below which a robot counts as at rest.
+        """m/s: the speed below which a robot counts as at rest (a speed noise can make).
 
         ``floor`` with exact odometry; with noise, at least the speed a robot at rest shows
         with probability :data:`FALSE_ALARM` (|n| of a 2-D normal is Rayleigh:
         P(|n| > r) = exp(-r² / 2σ_v²)).
         """
         return max(floor, self.velocity_std * math.sqrt(2.0 * math.log(1.0 / FALSE_ALARM)))
+
+    def resolved(self, force: float, unknown: float) -> float:
+        """m/s: the speed one step of ``force`` (N) changes.
+
+        Below it a force cannot tell rest from motion; ``unknown`` until the observer
+        knows the input gain.
+        """
+        return self.step_gain * force if self.step_gain > 0.0 else unknown
 
 
 def slowing_too_little(speed: float, before: float, dt: float, stop_time: float,
@@ -315,9 +326,12 @@ class Brake:
     Every command is within ``limit`` per axis (|u_i| <= F <= limit). The brake removes
     kinetic energy wherever a force along -v decelerates the robot (vᵀ B_v v > 0 for the
     velocity rows B_v of B, as on the rover family, B_v = I/m); overshooting rest in one
-    step halves F, so F falls geometrically until a step no longer overshoots. Below
-    ``rest_speed`` the force is proportional to the speed (no full push in the direction
-    of sensor noise). Beyond the papers, like the rest of this module.
+    step halves F, so F falls geometrically until a step no longer overshoots. Below the
+    rest speed the force is proportional to the speed (no full push in the direction of
+    sensor noise), and the robot is at rest: the larger of the speed odometry noise can
+    show and the speed one step of F changes (:meth:`Sensing.resolved`, from the
+    observer's input gain; ``rest_speed`` until it is known). Beyond the papers, like the
+    rest of this module.
     """
 
     limit: float
@@ -348,7 +362,9 @@ class Brake:
             return np.zeros(m)
         v = x[2:2 + m]
         speed = float(np.linalg.norm(v))
-        sense, rest = self.sensing, self.sensing.rest(self.rest_speed)
+        # at rest: slower than noise shows, and than one step of the brake's force changes
+        sense = self.sensing
+        rest = sense.rest(sense.resolved(self.force, self.rest_speed))
         lag = sense.lag
         self._recent.append(v.copy())
         while len(self._recent) > lag + 1:
@@ -390,7 +406,9 @@ class KeepOff:
       or the forces the robot has been pushed with) and doubles, up to ``limit``, while the approach speed
       does not fall fast enough to stop within the time to contact c / a; it halves when
       the approach has reversed (the robot moves away: no push then), and the push is
-      proportional to a below ``rest_speed`` (no full push at sensor noise);
+      proportional to a below the speed odometry noise can show (:meth:`Sensing.rest`: no
+      full push at sensor noise; with exact odometry any approach is answered in full:
+      a robot creeping in at 0.02 m/s under a steady push once touched an obstacle);
     * ahead of the zone, within ``lead`` seconds of it at the approach speed (from
       ``zone`` out to ``zone`` + ``lead`` a), it looks ahead, as Nav2's collision monitor
       does with its time before collision, when the robot heads at the obstacle (within
@@ -416,7 +434,6 @@ class KeepOff:
     dt: float
     lead: float = 0.0
     """s: how far ahead of the zone, in time at the approach speed, the approach is watched."""
-    rest_speed: float = 0.05
     force: float = 0.0
     prev: float | None = None
     """The approach speed a at the last pushing step (None: not pushing)."""
@@ -445,12 +462,16 @@ class KeepOff:
         return self.zone + self.lead * a
 
     def __call__(self, u: Array, velocity: Array, distance: float, direction: Array,
-                 scale: Callable[[], float]) -> Array:
+                 scale: Callable[[], float], steady: Array | None = None) -> Array:
         """The command u (m,) with its approach component replaced by a push, if needed.
 
         ``velocity`` (m,) the robot's, ``distance`` (m) and ``direction`` (unit, m) of the
         nearest detected obstacle; ``scale()`` (N) the force a new engagement starts from,
-        asked only then.
+        asked only then. ``steady`` (m,): the steady push the robot is under (N, as the
+        forces; the observer's estimate, where it stands out of the noise): in the zone the
+        command also cancels its part toward the obstacle, which otherwise creeps the robot
+        in below the speeds the rest of the rule answers (seen: a 1 m/s² field bump pressed a
+        robot holding station 1 mm into an obstacle at 0.02 m/s).
         """
         u = np.asarray(u, dtype=float)
         n = np.asarray(direction, dtype=float)[:u.size]
@@ -461,8 +482,12 @@ class KeepOff:
         self.push = 0.0
         a = -float(v @ n)
         inside = distance < self.zone
-        want = 0.0 if inside else -math.inf        # in the zone: no force toward it
-        sense, rest = self.sensing, self.sensing.rest(self.rest_speed)
+        want = -math.inf
+        if inside:                                 # in the zone: no force toward it, nor push
+            want = max(0.0, -float(np.asarray(steady, dtype=float)[:u.size] @ n)
+                       if steady is not None else 0.0)
+        # an approach noise cannot have made is answered in full (with exact odometry, any)
+        sense, rest = self.sensing, self.sensing.rest(0.0)
         lag, noise = sense.lag, sense.difference
         # moving away: by more than noise alone shows (with exact odometry, not approaching)
         if a < -noise / math.sqrt(2.0) if noise else a <= 0.0:
@@ -492,7 +517,7 @@ class KeepOff:
                 self._wait = lag - 1
             self.prev = a
             if self.force > 0.0:
-                want = self.force * min(1.0, a / rest)
+                want = max(want, self.force * (min(1.0, a / rest) if rest > 0.0 else 1.0))
         along = float(u @ n)
         if along >= want:
             return u

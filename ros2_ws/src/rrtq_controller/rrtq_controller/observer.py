@@ -156,7 +156,9 @@ class Observer:
         n, m, J = self.n, self.m, self.lags
         p = self.ar if ar is None else ar
         lagged = _lagged(u, J)
-        regress = np.hstack([x[:-1], lagged[:-1]])
+        # a constant column takes a steady push (a slope, a payload), which otherwise the
+        # states it displaced would explain in part, biasing Φ; it stays in the residual
+        regress = np.hstack([x[:-1], lagged[:-1], np.ones((len(x) - 1, 1))])
         target = x[1:]
         same = segment[1:] == segment[:-1]
         usable = same.copy()              # and the p transitions before in the same segment
@@ -172,8 +174,9 @@ class Observer:
             if not p:
                 break
             a = _ar_coefficients(target - regress @ w, usable, p)
-        e = (target - regress @ w)[same]
-        return OneStepModel(phi=w[:n].T.copy(), gammas=w[n:].reshape(J + 1, m, n).transpose(0, 2, 1),
+        e = (target - regress[:, :-1] @ w[:-1])[same]     # the steady push included
+        return OneStepModel(phi=w[:n].T.copy(),
+                            gammas=w[n:-1].reshape(J + 1, m, n).transpose(0, 2, 1),
                             ar=a, residual_cov=np.atleast_2d(np.cov(e.T)))
 
     def update(self) -> bool:
@@ -231,6 +234,24 @@ class Observer:
         x0[ok], x1[ok] = self._smoothed[idx], self._smoothed[idx + 1]
         u[ok] = self.model.equivalent_input(x0[ok], x1[ok])
         return x0, x1, u, ok
+
+    def steady_push(self, steps: int) -> tuple[Array, Array]:
+        """The matched push over the last ``steps`` transitions: its mean and standard error.
+
+        N per input, from the last :meth:`update` (zeros before a model). What a slope, a
+        payload or a field the robot stands in pushes it with: the part of the equivalent
+        input the commands do not explain, averaged.
+        """
+        zero = np.zeros(self.m)
+        if self.model is None or self._smoothed is None or len(self._smoothed) < 2:
+            return zero, zero
+        segment = self._smoothed_segment
+        x = self._smoothed
+        same = np.flatnonzero(segment[1:] == segment[:-1])[-steps:]
+        if len(same) < 2:
+            return zero, zero
+        push = self.model.equivalent_input(x[same], x[same + 1]) - self._acted[same]
+        return push.mean(axis=0), push.std(axis=0, ddof=1) / math.sqrt(len(same))
 
     def acted(self, steps: NDArray[np.int64], known: NDArray[np.bool_]) -> Array:
         """The commanded force that acted over each step (delayed as the model sees it).

@@ -137,6 +137,9 @@ class QLearningController(WeightReadout):
         """Changes with the leg coordinates (a new leg or horizon): the observer's segments."""
         self._step_id = -1
         """The observer's id of the step in :attr:`_prev`."""
+        self._steady = np.zeros(m)
+        """N per input: the steady push the observer last found (zero where noise could have
+        made it), which the keep-offs cancel near an obstacle."""
         self._since_eval = 0
         self.critic_trusted = False
         """Whether the critic's value of the actors' policy is positive (a diagnostic)."""
@@ -304,8 +307,8 @@ class QLearningController(WeightReadout):
         for keep, obstacle in zip((self._keep_off, self._keep_ahead), obstacles, strict=True):
             if obstacle is not None and x.size >= 2 + self.m:   # it acts within its reach only
                 u = np.clip(keep(u, velocity, obstacle[0], obstacle[1],
-                                 lambda: self._force_scale(self.critic.window.applied())),
-                            -limit, limit)
+                                 lambda: self._force_scale(self.critic.window.applied()),
+                                 self._steady), -limit, limit)
             else:
                 keep.release()
         if self.robust:
@@ -379,7 +382,15 @@ class QLearningController(WeightReadout):
             else:
                 window.estimate(x0, x1, u, known)
             assert self.observer.model is not None
-            self.sensing.dead_steps = self._braking_sense.dead_steps = self.observer.model.delay
+            model = self.observer.model
+            self.sensing.dead_steps = self._braking_sense.dead_steps = model.delay
+            velocity_rows = model.gamma[2:2 + self.m]
+            self._braking_sense.step_gain = (float(np.linalg.norm(velocity_rows, 2))
+                                             if velocity_rows.size else 0.0)
+            # the last second's steady push, where it stands out of the noise (guard.KeepOff)
+            mean, error = self.observer.steady_push(max(int(round(1.0 / self.config.dt)), 2))
+            z = float(norm.ppf(1.0 - FALSE_ALARM / 2))
+            self._steady = np.where(np.abs(mean) > z * error, mean, 0.0)
         if isinstance(self.critic, LeastSquaresCritic):
             self.critic.evaluate(self._rows)
         else:

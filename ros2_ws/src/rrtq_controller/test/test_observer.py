@@ -146,3 +146,23 @@ def test_the_log_keeps_its_memory_and_refuses_to_learn_from_too_little():
     assert obs.steps == 510
     y, *_ = obs._ordered()
     assert len(y) == 200
+
+
+def test_the_steady_push_is_the_constant_push_in_newtons():
+    """A constant 0.3 m/s² push through F (a slope): the observer's last second of the
+    equivalent input's unexplained part is m·F·d, with a standard error it stands out of."""
+    obs = Observer(4, 2, lags=3, memory=4000)
+    A, B = ref.rover(40.0, 0.0, 45.0)
+    plant = ref.Plant(A, B, DT, F)
+    rng = np.random.default_rng(0)
+    x = np.zeros(4)
+    for k in range(3000):
+        if k % 200 == 0:
+            x = np.concatenate([ref.random_legs(rng, 1, 2.0, 8.0)[0], x[2:]])
+        u = -np.array([[40.0, 0, 30.0, 0], [0, 40.0, 0, 30.0]]) @ x + 20.0 * rng.standard_normal(2)
+        obs.record(x, u, k // 200)
+        x = plant.step(x, u, np.array([0.3]))
+    obs.update()
+    mean, error = obs.steady_push(20)
+    assert mean == pytest.approx(40.0 * 0.3 * F[2:, 0], abs=0.05)
+    assert np.all(np.abs(mean) > 10 * error)
