@@ -1,6 +1,7 @@
 """Bad input exits 2 before anything starts; crashes and kills end runs cleanly."""
 
 import contextlib
+import io
 import json
 import os
 import pathlib
@@ -8,6 +9,7 @@ import signal
 import subprocess
 import time
 
+import numpy as np
 import pytest
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
@@ -71,6 +73,24 @@ def test_bad_scenario_exits_2_naming_file_and_key(tmp_path, kind):
     assert proc.returncode == 2, proc.stderr
     assert str(path) in proc.stderr and key in proc.stderr
     assert not out.exists()            # nothing started, nothing written
+
+
+def test_corrupt_model_file_exits_2_naming_file_and_key(tmp_path):
+    # A truncated .npz (zip magic, no central directory) used to end in a BadZipFile
+    # traceback with exit 1; it is bad input like any other.
+    buf = io.BytesIO()
+    np.savez(buf, A=np.eye(4))
+    (tmp_path / 'model.npz').write_bytes(buf.getvalue()[:60])
+    path = tmp_path / 'bad.yaml'
+    path.write_text(GOOD.replace('{variant: open_loop, forces: [[0.0, 5.0, 5.0]]}',
+                                 '{variant: nominal, model: model.npz}'))
+    out = tmp_path / 'out'
+    proc = subprocess.run([RRTQ, 'run', str(path), '--out', str(out)], capture_output=True,
+                          text=True, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert str(path) in proc.stderr and 'controller.model' in proc.stderr
+    assert str(tmp_path / 'model.npz') in proc.stderr and 'Traceback' not in proc.stderr
+    assert not out.exists()
 
 
 def test_missing_file_and_bad_speed_exit_2(tmp_path):

@@ -12,6 +12,7 @@ constant force or a spring to a fixed anchor).
 from __future__ import annotations
 
 import pathlib
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -116,8 +117,10 @@ class KoopmanModel:
                 a, b, c = (np.asarray(data[k], dtype=float) for k in ('A', 'B', 'C'))
                 dt, name = float(data['dt']), str(data['lifting'])
                 limit = float(data['force_limit'])
-        except (KeyError, OSError, ValueError) as exc:
-            raise ValueError(f'{path}: not a model written by rrtq identify ({exc})') from None
+        except (KeyError, OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            # A truncated or corrupt .npz is a zip np.load cannot open: bad input, not a crash.
+            raise ValueError(f'{path}: not a model written by rrtq identify '
+                             f'({type(exc).__name__}: {exc})') from None
         p = a.shape[0]
         if a.shape != (p, p) or b.shape[0] != p or c.shape[1] != p or not dt > 0.0:
             raise ValueError(f'{path}: inconsistent shapes A {a.shape}, B {b.shape}, '
