@@ -183,3 +183,113 @@ def test_a_bad_mjcf_file_is_refused_naming_it(tmp_path, text, words):
     with pytest.raises(MjcfError, match=words) as err:
         MujocoPlant([], DT, 1000.0, F_PAPER, mjcf=str(path))
     assert str(path) in str(err.value)
+
+
+# -- the scenario keys -------------------------------------------------------------------
+
+SCENARIO = {
+    'bounds': {'x': [-10, 10], 'y': [-10, 10]}, 'start': [-5.0, 0.0], 'goal': [5.0, 0.0],
+    'robot_radius': 0.3,
+    'plant': {'model': 'mujoco', 'mass': 30.0, 'damping': 10.0, 'friction': 5.0},
+    'obstacles': [{'id': 'box', 'polygon': [[-1, -1], [1, -1], [1, 1], [-1, 1]]}],
+}
+GOOD_MJCF = """<mujoco><worldbody><body name="base">
+  <joint name="x" type="slide" axis="1 0 0"/><joint name="y" type="slide" axis="0 1 0"/>
+  <geom type="cylinder" size="0.3 0.1" mass="12"/></body></worldbody>
+  <actuator><motor name="fx" joint="x"/><motor name="fy" joint="y"/></actuator></mujoco>"""
+
+
+def scenario(tmp_path, **plant):
+    from rrtq_bringup.scenario import parse_scenario
+    data = {**SCENARIO, 'plant': {'model': 'mujoco', **plant}}
+    return parse_scenario(data, str(tmp_path / 'sc.yaml'))
+
+
+def test_plant_model_mujoco_loads_with_its_keys(tmp_path):
+    from rrtq_sim.plant import PlantModel
+    sc = scenario(tmp_path, mass=30.0, damping=10.0, friction=5.0)
+    p = sc.plant
+    assert p.model is PlantModel.MUJOCO and p.mjcf is None
+    assert (p.mass, p.damping, p.friction, p.stiffness) == (30.0, 10.0, 5.0, 0.0)
+    a, b = rover_matrices(30.0, 0.0, 10.0)
+    assert np.array_equal(p.A, a) and np.array_equal(p.B, b)
+
+
+def test_plant_mjcf_is_read_relative_to_the_scenario_and_gives_the_mass(tmp_path):
+    (tmp_path / 'robot.xml').write_text(GOOD_MJCF)
+    p = scenario(tmp_path, mjcf='robot.xml').plant
+    assert p.mjcf == str(tmp_path / 'robot.xml') and p.mass == pytest.approx(12.0)
+
+
+@pytest.mark.parametrize('plant, key, words', [
+    ({'mjcf': 'gone.xml'}, 'plant.mjcf', 'no such file'),
+    ({'mjcf': 'bad.xml'}, 'plant.mjcf', 'not a valid MJCF'),
+    ({'mjcf': 'robot.xml', 'friction': 3.0}, 'plant.friction', 'the MJCF file defines it'),
+    ({'stiffness': 20.0}, 'plant.stiffness', ''),
+    ({'friction': -1.0}, 'plant.friction', ''),
+])
+def test_bad_mujoco_keys_name_the_file_and_the_key(tmp_path, plant, key, words):
+    from rrtq_bringup.scenario import ScenarioError
+    (tmp_path / 'robot.xml').write_text(GOOD_MJCF)
+    (tmp_path / 'bad.xml').write_text('<mujoco><worldbody><body')
+    with pytest.raises(ScenarioError) as err:
+        scenario(tmp_path, **plant)
+    assert err.value.key == key and err.value.file == str(tmp_path / 'sc.yaml')
+    assert words in str(err.value)
+
+
+def test_a_disturbance_with_position_rows_is_refused(tmp_path):
+    from rrtq_bringup.scenario import ScenarioError, parse_scenario
+    data = {**SCENARIO, 'disturbance': {'model': 'constant', 'F': [[1], [0], [0], [1]]}}
+    with pytest.raises(ScenarioError) as err:
+        parse_scenario(data, str(tmp_path / 'sc.yaml'))
+    assert err.value.key == 'disturbance.F'
+
+
+def test_rrtq_run_exits_2_on_a_missing_mjcf_naming_the_file_and_the_key(tmp_path, root):
+    import subprocess
+    import yaml
+    path = tmp_path / 'bad.yaml'
+    path.write_text(yaml.safe_dump({**SCENARIO, 'plant': {'model': 'mujoco',
+                                                          'mjcf': 'nope.xml'}}))
+    out = tmp_path / 'out'
+    proc = subprocess.run([str(root / 'scripts/rrtq'), 'run', str(path), '--out', str(out)],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2, proc.stderr
+    assert str(path) in proc.stderr and 'plant.mjcf' in proc.stderr and 'nope.xml' in proc.stderr
+    assert not out.exists()
+
+
+def test_the_example_scenario_loads(root):
+    from rrtq_bringup.scenario import load_scenario
+    from rrtq_sim.plant import PlantModel
+    sc = load_scenario(root / 'scenarios' / 'mujoco_friction.yaml')
+    assert sc.plant.model is PlantModel.MUJOCO and sc.plant.friction > 0.0
+
+
+# -- the supervisor's judgement of a contact ---------------------------------------------------
+
+def _monitor():
+    from rrtq_bringup.mission import MissionConfig, MissionMonitor
+    from rrtq_common.world import TrueObstacles
+    config = MissionConfig(goal=(50.0, 0.0), duration=100.0, robot_radius=0.3,
+                           bounds=((-100.0, 100.0), (-100.0, 100.0)), dt=DT)
+    return MissionMonitor(config, TrueObstacles([BOX], 0.3))
+
+
+@pytest.mark.parametrize('contact_first', [True, False])
+def test_a_contact_ends_the_run_as_a_collision_whichever_message_comes_first(contact_first):
+    """The step at t = 0.1 touched the box (and its odometry overlaps it by 2 mm)."""
+    from rrtq_bringup.mission import Outcome
+    mon = _monitor()
+    mon.on_odometry(0.05, np.array([1.0, 0.0]))
+    if contact_first:
+        mon.on_contact(0.1, ('box',), 1)
+        assert mon.outcome is Outcome.RUNNING          # waits for its odometry
+        mon.on_odometry(0.1, np.array([1.702, 0.0]))
+    else:
+        mon.on_odometry(0.1, np.array([1.702, 0.0]))
+        mon.on_contact(0.1, ('box',), 1)
+    assert mon.outcome is Outcome.COLLISION and mon.collided and not mon.success
+    assert mon.reason.startswith('physical contact with box at t=0.10 s')
+    assert mon.summary()['contact_steps'] == 1 and mon.t == pytest.approx(0.1)
