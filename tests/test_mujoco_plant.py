@@ -6,6 +6,8 @@ Coulomb friction holds a base pushed below its level and lets (F - friction)/m t
 above it, an obstacle is a physical contact, and a sequence repeats bit for bit.
 """
 
+import pathlib
+
 import numpy as np
 import pytest
 
@@ -14,6 +16,7 @@ from rrtq_sim.mujoco_model import SUBSTEPS, BaseParameters, MjcfError, obstacle_
 from rrtq_sim.mujoco_plant import MujocoPlant
 from rrtq_sim.plant import Plant, rover_matrices
 
+ROOT = pathlib.Path(__file__).resolve().parents[1]
 DT = 0.05
 F_PAPER = [[0.0], [0.0], [-1.0], [1.0]]
 BOX = ObstacleSpec('box', np.array([[2.0, -1.0], [3.0, -1.0], [3.0, 1.0], [2.0, 1.0]]))
@@ -293,3 +296,91 @@ def test_a_contact_ends_the_run_as_a_collision_whichever_message_comes_first(con
     assert mon.outcome is Outcome.COLLISION and mon.collided and not mon.success
     assert mon.reason.startswith('physical contact with box at t=0.10 s')
     assert mon.summary()['contact_steps'] == 1 and mon.t == pytest.approx(0.1)
+
+
+# -- rrtq run, lock-step ------------------------------------------------------------------
+
+HIT = """
+name: mujoco-hit
+seed: 3
+bounds: {x: [-5, 8], y: [-5, 5]}
+start: [0.0, 0.0]
+goal: [-4.0, 4.0]
+duration: 10.0
+robot_radius: 0.3
+plant:
+  model: mujoco
+  mass: 40.0
+  damping: 10.0
+  friction: 20.0
+  force_limit: 200.0
+  actuation_delay: 0.1
+  odometry_noise: {position: 0.01, velocity: 0.01}
+controller:
+  variant: open_loop
+  forces: [[0.0, 120.0, 0.0]]
+obstacles:
+  - {id: wall, polygon: [[3, -2], [4, -2], [4, 2], [3, 2]]}
+"""
+
+
+def _recorded(path, topics):
+    from mcap.reader import make_reader
+    out = {t: [] for t in topics}
+    with open(path, 'rb') as f:
+        for _, channel, message in make_reader(f).iter_messages(log_time_order=False):
+            if channel.topic in out:
+                out[channel.topic].append(message.data)
+    return out
+
+
+@pytest.fixture(scope='module')
+def two_runs(tmp_path_factory):
+    import subprocess
+    tmp = tmp_path_factory.mktemp('mujoco_run')
+    path = tmp / 'hit.yaml'
+    path.write_text(HIT)
+    runs = []
+    for k in range(2):
+        out = tmp / f'run{k}'
+        proc = subprocess.run([str(ROOT / 'scripts/rrtq'), 'run', str(path), '--out', str(out),
+                               '--mode', 'composed'], capture_output=True, text=True,
+                              timeout=300)
+        runs.append((proc, out))
+    return runs
+
+
+def test_driving_into_a_wall_ends_the_run_as_a_physical_contact(two_runs):
+    import json
+    from mcap_ros2.decoder import DecoderFactory
+    from mcap.reader import make_reader
+    proc, out = two_runs[0]
+    assert proc.returncode == 1, proc.stderr
+    summary = json.loads((out / 'summary.json').read_text())
+    assert summary['outcome'] == 'collision' and summary['collided'] is True
+    assert summary['reason'].startswith('physical contact with wall at t=')
+    assert summary['contact_steps'] >= 1
+    decoded = {}
+    factory = DecoderFactory()
+    with open(out / 'run.mcap', 'rb') as f:
+        for schema, channel, message in make_reader(f).iter_messages():
+            if channel.topic in ('/plant/contact', '/odom/truth'):
+                decode = factory.decoder_for(channel.message_encoding, schema)
+                decoded.setdefault(channel.topic, []).append(decode(message.data))
+    contact = decoded['/plant/contact'][0]
+    assert list(contact.obstacles) == ['wall'] and contact.contact_steps == 1
+    t_contact = contact.header.stamp.sec + contact.header.stamp.nanosec * 1e-9
+    assert f't={t_contact:.2f} s' in summary['reason']
+    # the truth at the contact: the disc (0.3 m) at the wall's face x = 3, millimetres in
+    last = max(decoded['/odom/truth'], key=lambda m: (m.header.stamp.sec, m.header.stamp.nanosec))
+    assert 2.65 < last.pose.pose.position.x < 2.75
+
+
+def test_a_run_repeats_exactly(two_runs):
+    (p0, out0), (p1, out1) = two_runs
+    assert p0.returncode == p1.returncode == 1
+    topics = ('/odom', '/odom/truth', '/plant/contact')
+    a, b = _recorded(out0 / 'run.mcap', topics), _recorded(out1 / 'run.mcap', topics)
+    assert len(a['/odom']) > 20
+    for topic in topics:
+        assert sorted(a[topic]) == sorted(b[topic]), topic
