@@ -111,6 +111,31 @@ def test_an_absent_obstacle_is_not_physical():
     assert x[0] > 3.5 and mj.contact_steps == 0
 
 
+def test_obstacles_come_and_go_with_the_truth_the_referee_keeps():
+    """The simulation switches the plant's geoms to what exists before each step: a wall
+    that vanishes at 0.2 s is driven through, one that appears at 0.5 s is hit."""
+    from rrtq_common.world import TrueObstacles
+    from rrtq_sim.plant import SpringAnchor
+    from rrtq_sim.simulation import Simulation
+    gone = ObstacleSpec('gone', np.array([[1.0, -1.0], [1.5, -1.0], [1.5, 1.0], [1.0, 1.0]]),
+                        vanish_at=0.2)
+    late = ObstacleSpec('late', np.array([[3.0, -1.0], [4.0, -1.0], [4.0, 1.0], [3.0, 1.0]]),
+                        appear_at=0.5)
+    mj = plant(damping=0.0, obstacles=[gone, late])
+    sim = Simulation(mj, [0.0, 0.0], SpringAnchor.WORLD_ORIGIN, 0.0,
+                     truth=TrueObstacles([gone, late], 0.3))
+    sim.hold_force([200.0, 0.0])
+    touched = []
+    for _ in range(40):
+        sim.advance()
+        if sim.contact:
+            touched.append((sim.now_ns * 1e-9, sim.contact))
+    assert touched and {c for _, c in touched} == {('late',)}
+    # free flight at 5 m/s^2 puts the disc's edge at x = 3 at t = sqrt(2 * 2.7 / 5) = 1.04 s
+    assert touched[0][0] == pytest.approx(1.05, abs=1e-9)
+    assert sim.x[0] == pytest.approx(2.7, abs=0.02)
+
+
 def test_a_non_convex_obstacle_is_its_triangles_and_its_notch_is_free():
     pieces = obstacle_pieces(ELL.polygon)
     assert len(pieces) > 1
