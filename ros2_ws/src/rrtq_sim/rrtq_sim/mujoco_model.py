@@ -44,7 +44,7 @@ MIN_RADIUS = 1e-3
 PRISM_Z = (-1.0, 2.0)
 """m; the vertical extent of every obstacle prism (covers a user's base standing on z = 0)."""
 SUBSTEPS = 10
-"""MuJoCo steps per plant step Δt (RK4: the error against the exact rover is ~1e-11 m)."""
+"""MuJoCo steps per plant step Δt (RK4: 5e-12 m from the exact rover over 200 steps of 0.05 s)."""
 
 
 class MjcfError(ValueError):
