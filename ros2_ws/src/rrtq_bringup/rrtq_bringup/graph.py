@@ -38,6 +38,7 @@ from rrtq_common.world_yaml import WorldSource
 from rrtq_controller.config import Variant
 from rrtq_planner.guidance import GuidanceMode
 from rrtq_sim.disturbance import DisturbanceModel
+from rrtq_sim.plant import PlantModel
 from rrtq_sim.simulation import SimulatorConfig
 
 STEP_TOPICS = (topics.CLOCK, topics.ODOM, topics.ODOM_TRUTH, topics.CMD_FORCE,
@@ -159,11 +160,17 @@ def build_graph(scenario: Scenario, speed: float, output: str,
                                 speed=speed, duration=scenario.duration,
                                 acks=('cmd_force', 'controller_state', 'disturbance'),
                                 wait_for=wait_for, ready_from=tuple(announcing))
+    # The physics plant also builds its obstacles from the scenario file; the linear plants
+    # need only their matrices.
+    physics = plant.model is PlantModel.MUJOCO
+    plant_params = (to_parameters(plant, exclude=('stiffness',) + (('damping',) if plant.mjcf
+                                                                     else ()))
+                    if physics else to_parameters(plant, exclude=(
+                        'model', 'mass', 'stiffness', 'damping', 'friction', 'mjcf')))
     simulator_spec = NodeSpec(
         'simulator', 'rrtq_sim.simulator_node', 'SimulatorNode',
-        {**only(dims, 'n'), **only(run, 'dt', 'seed'),
-         **to_parameters(plant, exclude=('model', 'mass', 'stiffness', 'damping')),
-         **to_parameters(scenario.odometry_noise),
+        {**only(dims, 'n'), **only(run, 'dt', 'seed'), **plant_params,
+         **(world if physics else {}), **to_parameters(scenario.odometry_noise),
          'F': to_parameters(dist)['F'], **to_parameters(simulator)},
         subscribes=SIMULATOR_READS)
     return [simulator_spec, *others]

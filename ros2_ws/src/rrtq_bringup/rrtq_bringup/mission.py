@@ -70,6 +70,8 @@ class MissionMonitor:
         self.min_clearance = math.inf
         self.time_to_goal: float | None = None
         self.collided = False
+        self.contact_steps = 0
+        self._pending_contact: tuple[float, tuple[str, ...]] | None = None
         self.controller_step_ms: list[float] = []
         self.replan_ms: list[float] = []
         self.replans = 0
@@ -115,7 +117,31 @@ class MissionMonitor:
                 reason += (f'; the planner has had no path to the goal since '
                            f't={self.no_path_since:.2f} s (goal cut off)')
             self.finish(Outcome.DURATION, reason)
+        if self._pending_contact is not None and self._pending_contact[0] <= t + 1e-9:
+            self._physical_contact(*self._pending_contact)
         return self.outcome
+
+    def on_contact(self, t: float, obstacles: tuple[str, ...], contact_steps: int) -> None:
+        """The physics plant felt the robot touch ``obstacles`` in the step ending at ``t`` (s).
+
+        A collision like the referee's overlap, which it usually accompanies (MuJoCo's soft
+        contact lets the disc in by millimetres). The outcome is ``collision`` and the reason
+        names the physical contact whichever of the step's contact and odometry arrives
+        first: a contact ahead of its odometry waits for it.
+        """
+        self.contact_steps = max(self.contact_steps, int(contact_steps))
+        if t > self.t + 1e-9 and self.outcome is Outcome.RUNNING:
+            if self._pending_contact is None:
+                self._pending_contact = (t, obstacles)
+            return
+        if self.outcome is Outcome.RUNNING or abs(self.t - t) <= 1e-9:
+            self._physical_contact(t, obstacles)
+
+    def _physical_contact(self, t: float, obstacles: tuple[str, ...]) -> None:
+        self.collided = True
+        self.outcome = Outcome.COLLISION
+        self.reason = (f'physical contact with {", ".join(obstacles)} at t={t:.2f} s '
+                       '(plant.model: mujoco)')
 
     def on_plan_status(self, t: float, has_path: bool) -> None:
         """Track since when the planner has had no path (for the failure reason)."""
@@ -155,6 +181,7 @@ class MissionMonitor:
         return {
             'success': self.success,
             'collided': self.collided,
+            'contact_steps': self.contact_steps,
             'outcome': str(self.outcome),
             'reason': self.reason,
             'time_to_goal_s': self.time_to_goal,

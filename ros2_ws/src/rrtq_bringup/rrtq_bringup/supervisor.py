@@ -6,7 +6,7 @@ import numpy as np
 from geometry_msgs.msg import PoseStamped, WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
-from rrtq_msgs.msg import ControllerState, PlannerStats
+from rrtq_msgs.msg import ControllerState, PlannerStats, PlantContact
 from std_msgs.msg import Empty
 
 from rrtq_bringup.mission import MissionMonitor
@@ -39,6 +39,8 @@ class SupervisorNode(Node):
         self.create_subscription(ControllerState, topics.CONTROLLER_STATE, self.on_state,
                                  qos.STREAM)
         self.create_subscription(PlannerStats, topics.PLANNER_STATS, self.on_stats, qos.STREAM)
+        # The physics plant's contacts (plant.model: mujoco): a collision the simulator felt.
+        self.create_subscription(PlantContact, topics.PLANT_CONTACT, self.on_contact, qos.STREAM)
 
     def on_odom_bytes(self, data: bytes) -> None:
         self.on_odom(conv.read_odometry(data))
@@ -60,6 +62,10 @@ class SupervisorNode(Node):
 
     def on_state(self, msg: ControllerState) -> None:
         self.monitor.controller_step_ms.append(msg.step_ms)
+
+    def on_contact(self, msg: PlantContact) -> None:
+        self.monitor.on_contact(conv.stamp_ns(msg.header.stamp) * 1e-9, tuple(msg.obstacles),
+                                msg.contact_steps)
 
     def on_stats(self, msg: PlannerStats) -> None:
         self.monitor.on_plan_status(conv.stamp_ns(msg.header.stamp) * 1e-9,

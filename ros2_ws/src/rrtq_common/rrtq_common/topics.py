@@ -19,6 +19,7 @@ DISTURBANCE_ESTIMATE = '/safety/disturbance_estimate'
 PERCEPTION_STATUS = '/perception/status'
 OBSTACLES_TRUTH = '/obstacles/truth'
 REFEREE_STATUS = '/referee/status'
+PLANT_CONTACT = '/plant/contact'
 SIMULATOR_PAUSE = '/simulator/pause'
 GUIDANCE_REFERENCE = '/guidance/reference'
 # The start-up handshake (rrtq_common.readiness): each writer of per-step topics, once connected.

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 from std_msgs.msg import Header
-from rrtq_msgs.msg import Disturbance, PerceptionStatus, RefereeStatus
+from rrtq_msgs.msg import Disturbance, PerceptionStatus, PlantContact, RefereeStatus
 
 from rrtq_common.conversions import MAP_FRAME, time_msg
 from rrtq_sim.perception import ObstacleEvent, Observation
@@ -35,3 +35,11 @@ def referee_status_msg(header: Header, judgement: Judgement) -> RefereeStatus:
         header=header, min_clearance=judgement.clearance, nearest_obstacle=judgement.nearest,
         collision=judgement.collision, out_of_bounds=judgement.out_of_bounds,
         bounds_clearance=judgement.bounds_clearance)
+
+
+def plant_contact_msg(ns: int, obstacles: tuple[str, ...], contact_steps: int) -> PlantContact:
+    """The step ending at ``ns`` touched ``obstacles`` (physics plant)."""
+    msg = PlantContact(obstacles=list(obstacles), contact_steps=int(contact_steps))
+    msg.header.stamp = time_msg(ns)
+    msg.header.frame_id = MAP_FRAME
+    return msg

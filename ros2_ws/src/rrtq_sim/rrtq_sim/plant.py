@@ -31,6 +31,8 @@ class PlantModel(enum.StrEnum):
 
     ROVER = 'rover'
     LTI = 'lti'
+    MUJOCO = 'mujoco'
+    """The physics plant (:mod:`rrtq_sim.mujoco_plant`); A and B are its free-motion rover."""
 
 
 @dataclass(frozen=True, eq=False, kw_only=True)
@@ -39,7 +41,10 @@ class PlantConfig:
 
     The rover's matrices follow from its mass, stiffness and damping
     (:func:`rover_matrices`); an ``lti`` plant gives A and B (mass, stiffness and damping
-    are then nan).
+    are then nan). A ``mujoco`` plant is stepped by MuJoCo; its A and B are the rover's
+    without spring or friction (its free motion), for what needs a linear model of the
+    truth (the worst-case game, the leg tables). With ``mjcf`` its mass is the file's base
+    (and what it carries) and damping is nan (the file's own business).
     """
 
     A: np.ndarray = setting(rows='n', doc='state matrix A (n x n), 1/s and 1/s^2 entries')
@@ -54,6 +59,10 @@ class PlantConfig:
                                  doc='saturation per axis (inf: none)')
     actuation_delay: float = setting(0.0, unit='s', low=0.0, doc='the force commanded at a '
                                      'step acts this much later (a multiple of the step)')
+    friction: float = setting(0.0, unit='N', low=0.0, doc='mujoco: Coulomb friction per axis, '
+                              'the largest force the base resists at rest')
+    mjcf: str | None = setting(None, doc='mujoco: a user MJCF file (body base, actuators fx '
+                               'and fy); none: the shipped planar base')
 
     def __post_init__(self) -> None:
         check(self)

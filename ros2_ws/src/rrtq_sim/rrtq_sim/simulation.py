@@ -15,6 +15,8 @@ import numpy.typing as npt
 
 from rrtq_common.lockstep import seconds_to_ns
 from rrtq_common.settings import check, setting
+from rrtq_common.world import TrueObstacles
+from rrtq_sim.mujoco_plant import MujocoPlant
 from rrtq_sim.plant import Plant, SpringAnchor
 
 __all__ = ['SimulatorConfig', 'Simulation', 'DelayLine', 'delay_steps']
@@ -100,7 +102,7 @@ class Simulation:
 
     Parameters
     ----------
-    plant : Plant
+    plant : Plant or MujocoPlant
     start : array_like, shape (2,)
         Initial position, m (at rest).
     anchor : SpringAnchor
@@ -110,11 +112,15 @@ class Simulation:
     delay : int
         The actuator's delay in steps: the force held at step k acts over step k + delay
         (the spring's anchor is not delayed).
+    truth : TrueObstacles, optional
+        The physics plant's obstacles as they come and go: before each step the plant's
+        geoms are switched to what exists (the spawner's referee keeps the same truth).
     """
 
-    def __init__(self, plant: Plant, start: npt.ArrayLike, anchor: SpringAnchor,
-                 duration: float, delay: int = 0) -> None:
+    def __init__(self, plant: Plant | MujocoPlant, start: npt.ArrayLike, anchor: SpringAnchor,
+                 duration: float, delay: int = 0, truth: TrueObstacles | None = None) -> None:
         self.plant = plant
+        self.truth = truth
         self.anchor_mode = anchor
         self.dt_ns = seconds_to_ns(plant.dt)
         self.duration_ns = seconds_to_ns(duration)
@@ -132,6 +138,11 @@ class Simulation:
     def now_ns(self) -> int:
         """Sim time of the current state, ns."""
         return self.step_index * self.dt_ns
+
+    @property
+    def contact(self) -> tuple[str, ...]:
+        """Obstacles the robot touched during the last step (physics plant; else none)."""
+        return self.plant.contact if isinstance(self.plant, MujocoPlant) else ()
 
     @property
     def finished(self) -> bool:
@@ -171,6 +182,9 @@ class Simulation:
         if self.paused or self.finished:
             return False
         anchor = self.anchor if self.anchor_mode is SpringAnchor.LEG_TARGET else np.zeros(2)
+        if self.truth is not None and isinstance(self.plant, MujocoPlant):
+            existing = self.truth.update(self.x[:2], self.now_ns * 1e-9)
+            self.plant.set_present(spec.id for spec in existing)
         self.x = self.plant.step(self.x, self.delay.shift(self.u), self.d, anchor)
         self.step_index += 1
         return True

@@ -5,6 +5,10 @@ covariance filled in: :mod:`rrtq_sim.odometry`); /odom/truth is the true state, 
 simulator's side and the recording. A commanded force acts ``plant.actuation_delay``
 later (:class:`rrtq_sim.simulation.DelayLine`).
 
+With ``model`` mujoco the plant is :class:`rrtq_sim.mujoco_plant.MujocoPlant`, built with
+the obstacles of the scenario file (``scenario``); a step during which the robot touched
+one is announced on /plant/contact before its odometry.
+
 Lock-step (``speed`` = 0, the CLI's ``--speed max``): step k+1 is taken only when every
 topic in ``acks`` has delivered its message stamped with step k's time, so a run is a
 function of its inputs alone. Paced (``speed`` > 0): a wall timer steps the plant at
@@ -20,7 +24,7 @@ from geometry_msgs.msg import WrenchStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
-from rrtq_msgs.msg import ControllerState, Disturbance, PerceptionStatus
+from rrtq_msgs.msg import ControllerState, Disturbance, PerceptionStatus, PlantContact
 from std_msgs.msg import Empty, String
 
 from rrtq_common import conversions as conv
@@ -31,8 +35,13 @@ from rrtq_common.lockstep import Requirement, Step, StepGate
 from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
 from rrtq_sim.disturbance import DisturbanceConfig
+from rrtq_common.world import TrueObstacles
+from rrtq_common.world_yaml import WorldSource, load_world
+from rrtq_sim.conversions import plant_contact_msg
+from rrtq_sim.mujoco_model import BaseParameters
+from rrtq_sim.mujoco_plant import MujocoPlant
 from rrtq_sim.odometry import OdometryNoise, OdometryNoiseConfig, odometry_rng
-from rrtq_sim.plant import Plant, PlantConfig
+from rrtq_sim.plant import Plant, PlantConfig, PlantModel
 from rrtq_sim.simulation import Simulation, SimulatorConfig, delay_steps
 
 ACK_TOPICS = {'cmd_force': (topics.CMD_FORCE, WrenchStamped),
@@ -50,14 +59,23 @@ class SimulatorNode(Node):
         super().__init__('simulator', **NODE_OPTIONS, **kwargs)
         dims = declare_config(self, Dimensions, exclude=('m', 'q'))
         run = declare_config(self, RunConfig, exclude=('lockstep',))
-        plant = declare_config(self, PlantConfig, dims,
-                               exclude=('model', 'mass', 'stiffness', 'damping'))
+        plant = declare_config(self, PlantConfig, dims, exclude=('stiffness',))
         disturbance = declare_config(self, DisturbanceConfig, dims,
                                      exclude=('model', 'amplitude', 'frequency', 'gamma'))
         self.config = declare_config(self, SimulatorConfig)
-        self.sim = Simulation(Plant(plant.A, plant.B, disturbance.F, run.dt, plant.force_limit),
-                              self.config.start, plant.spring_anchor, self.config.duration,
-                              delay_steps(plant.actuation_delay, run.dt))
+        delay = delay_steps(plant.actuation_delay, run.dt)
+        if plant.model is PlantModel.MUJOCO:
+            world = load_world(declare_config(self, WorldSource).scenario)
+            physics = MujocoPlant(world.obstacles, run.dt, plant.force_limit, disturbance.F,
+                                  BaseParameters(plant.mass, plant.damping, plant.friction,
+                                                 world.robot_radius), plant.mjcf)
+            self.sim = Simulation(physics, self.config.start, plant.spring_anchor,
+                                  self.config.duration, delay, TrueObstacles.for_scenario(world))
+        else:
+            self.sim = Simulation(Plant(plant.A, plant.B, disturbance.F, run.dt,
+                                        plant.force_limit),
+                                  self.config.start, plant.spring_anchor, self.config.duration,
+                                  delay)
         self.noise = OdometryNoise(declare_config(self, OdometryNoiseConfig),
                                    odometry_rng(run.seed))
         self._last_odometry: tuple[Odometry, Odometry] | None = None
@@ -67,6 +85,8 @@ class SimulatorNode(Node):
         self.clock_pub = self.create_publisher(Clock, topics.CLOCK, qos.CLOCK)
         self.odom_pub = self.create_publisher(Odometry, topics.ODOM, qos.STREAM)
         self.truth_pub = self.create_publisher(Odometry, topics.ODOM_TRUTH, qos.STREAM)
+        self.contact_pub = (self.create_publisher(PlantContact, topics.PLANT_CONTACT, qos.STREAM)
+                            if plant.model is PlantModel.MUJOCO else None)
         self.gate = StepGate([Requirement(key) for key in self.config.acks],
                              lockstep=self.config.speed == 0.0, driver=None, ordered=False,
                              on_step=self._on_step)
@@ -166,6 +186,10 @@ class SimulatorNode(Node):
             now, self.noise.measure(self.sim.x), self.noise.position_variance,
             self.noise.velocity_variance)
         self._last_odometry = truth, measured
+        if self.contact_pub is not None and self.sim.contact:
+            assert isinstance(self.sim.plant, MujocoPlant)
+            self.contact_pub.publish(plant_contact_msg(now, self.sim.contact,
+                                                       self.sim.plant.contact_steps))
         self.clock_pub.publish(conv.clock_msg(now))
         self._publish_odometry()
 

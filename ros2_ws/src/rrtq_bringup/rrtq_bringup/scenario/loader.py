@@ -24,7 +24,7 @@ from rrtq_common.yaml_reader import Reader, ScenarioError, read_yaml
 from rrtq_controller.config import ControllerConfig, Variant
 from rrtq_sim.disturbance import (DisturbanceGenerator, DisturbanceModel, WorstCaseGame,
                                   make_generator)
-from rrtq_sim.plant import Plant, PlantConfig
+from rrtq_sim.plant import Plant, PlantConfig, PlantModel
 from rrtq_sim.riccati import RiccatiEscape, RiccatiSolution, game_gamma_bound, solve_riccati
 from rrtq_sim.simulation import delay_steps
 
@@ -77,11 +77,14 @@ def parse_scenario(data: Any, path: str) -> Scenario:
     seed = data.get('seed', 0)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise r.error('seed', f'expected an integer >= 0, got {seed!r}')
-    plant = read_plant(r, data.get('plant'))
+    plant = read_plant(r, data.get('plant'), os.path.dirname(os.path.abspath(path)))
     odometry_noise = read_odometry_noise(r, data.get('plant'))
     ctrl_raw = data.get('controller')
     robust = isinstance(ctrl_raw, Mapping) and ctrl_raw.get('variant') == Variant.ROBUST
     disturbance = read_disturbance(r, data.get('disturbance'), plant.n, robust)
+    if plant.model is PlantModel.MUJOCO and np.any(disturbance.F[:2]):
+        raise r.error('disturbance.F', 'with plant.model mujoco the disturbance is a force '
+                      '(mass x acceleration): F must be zero in its position rows')
     controller = read_controller(r, ctrl_raw, plant, world)
     try:
         delay_steps(plant.actuation_delay, controller.dt)

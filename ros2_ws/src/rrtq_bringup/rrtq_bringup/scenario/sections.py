@@ -25,6 +25,7 @@ from rrtq_planner.safety import SafetyConfig
 from rrtq_planner.session import PlannerConfig
 from rrtq_sim.disturbance import DisturbanceConfig, DisturbanceModel
 from rrtq_sim.field import field_input_matrix
+from rrtq_sim.mujoco_model import BASE_BODY, MjcfError, build_model
 from rrtq_sim.odometry import OdometryNoiseConfig
 from rrtq_sim.plant import PlantConfig, PlantModel, rover_matrices
 
@@ -35,6 +36,9 @@ _SENSING_KEYS = ('actuation_delay', 'odometry_noise')
 _ROVER_KEYS = ('model', 'mass', 'stiffness', 'damping', 'spring_anchor', 'force_limit',
                *_SENSING_KEYS)
 _LTI_KEYS = ('model', 'A', 'B', 'spring_anchor', 'force_limit', *_SENSING_KEYS)
+_MUJOCO_KEYS = ('model', 'mass', 'damping', 'friction', 'mjcf', 'force_limit', *_SENSING_KEYS)
+_MJCF_OWN = ('mass', 'damping', 'friction')
+"""What a user's MJCF file defines itself: not keys beside ``plant.mjcf``."""
 # plant.odometry_noise key -> OdometryNoiseConfig field
 _NOISE_KEYS = {'position': 'position_std', 'velocity': 'velocity_std'}
 _DIST_KEYS = ('model', 'F', 'amplitude', 'frequency', 'gamma', 'bumps')
@@ -63,14 +67,49 @@ def _choice(r: Reader, data: dict[str, Any], name: str, cls: type, section: str)
     return r.choice(data.get(name, field_default(cls, name)), f'{section}.{name}', enum_type)
 
 
-def read_plant(r: Reader, raw: Any) -> PlantConfig:
-    """``plant:``: the rover (mass, stiffness, damping) or an LTI plant (A, B)."""
+def _read_mujoco(r: Reader, data: dict[str, Any], limit: float, base: str) -> PlantConfig:
+    """``plant: {model: mujoco}``: the shipped base (mass, damping, friction) or ``mjcf``."""
+    key = 'plant'
+    delay = r.setting(data, 'actuation_delay', PlantConfig, key)
+    if data.get('mjcf') is None:
+        mass, damping, friction = (r.setting(data, name, PlantConfig, key)
+                                   for name in _MJCF_OWN)
+        a, b = rover_matrices(mass, 0.0, damping)
+        return PlantConfig(model=PlantModel.MUJOCO, A=frozen(a), B=frozen(b), mass=mass,
+                           stiffness=0.0, damping=damping, friction=friction,
+                           force_limit=limit, actuation_delay=delay)
+    for name in _MJCF_OWN:
+        if name in data:
+            raise r.error(f'plant.{name}', 'not with plant.mjcf: the MJCF file defines it')
+    file = os.path.normpath(os.path.join(base, os.path.expanduser(
+        r.string(data['mjcf'], 'plant.mjcf'))))
+    try:
+        model = build_model([], 0.005, mjcf=file)
+    except MjcfError as exc:
+        raise r.error('plant.mjcf', str(exc)) from None
+    mass = float(model.body_subtreemass[model.body(BASE_BODY).id])
+    if not mass > 0.0:
+        raise r.error('plant.mjcf', f'{file}: body {BASE_BODY!r} has no mass')
+    a, b = rover_matrices(mass, 0.0, 0.0)
+    return PlantConfig(model=PlantModel.MUJOCO, A=frozen(a), B=frozen(b), mass=mass,
+                       stiffness=0.0, damping=np.nan, mjcf=file, force_limit=limit,
+                       actuation_delay=delay)
+
+
+def read_plant(r: Reader, raw: Any, base: str = '') -> PlantConfig:
+    """``plant:``: the rover (mass, stiffness, damping), an LTI plant (A, B) or mujoco.
+
+    ``base``: the directory a relative ``plant.mjcf`` is read from (the scenario's).
+    """
     key = 'plant'
     data = r.mapping({} if raw is None else raw, key, None)
     model = _choice(r, data, 'model', PlantConfig, key)
-    data = r.mapping(data, key, _ROVER_KEYS if model is PlantModel.ROVER else _LTI_KEYS)
+    data = r.mapping(data, key, {PlantModel.ROVER: _ROVER_KEYS, PlantModel.LTI: _LTI_KEYS,
+                                 PlantModel.MUJOCO: _MUJOCO_KEYS}[model])
     anchor = _choice(r, data, 'spring_anchor', PlantConfig, key)
     limit = r.setting(data, 'force_limit', PlantConfig, key, allow_inf=True)
+    if model is PlantModel.MUJOCO:
+        return _read_mujoco(r, data, limit, base)
     if model is PlantModel.ROVER:
         mass, stiffness, damping = (r.setting(data, name, PlantConfig, key)
                                     for name in ('mass', 'stiffness', 'damping'))
