@@ -25,7 +25,6 @@ from rrtq_planner.safety import SafetyConfig
 from rrtq_planner.session import PlannerConfig
 from rrtq_sim.disturbance import DisturbanceConfig, DisturbanceModel
 from rrtq_sim.field import field_input_matrix
-from rrtq_sim.mujoco_model import BASE_BODY, MjcfError, build_model
 from rrtq_sim.odometry import OdometryNoiseConfig
 from rrtq_sim.plant import PlantConfig, PlantModel, rover_matrices
 
@@ -83,6 +82,8 @@ def _read_mujoco(r: Reader, data: dict[str, Any], limit: float, base: str) -> Pl
             raise r.error(f'plant.{name}', 'not with plant.mjcf: the MJCF file defines it')
     file = os.path.normpath(os.path.join(base, os.path.expanduser(
         r.string(data['mjcf'], 'plant.mjcf'))))
+    # MuJoCo loads only for a scenario that uses it (0.3 s of import on every other run).
+    from rrtq_sim.mujoco_model import BASE_BODY, MjcfError, build_model
     try:
         model = build_model([], 0.005, mjcf=file)
     except MjcfError as exc:
