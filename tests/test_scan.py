@@ -1,0 +1,197 @@
+"""Perception from a laser scan: the ray caster, the obstacle mapper, the scenario section."""
+
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from rrtq_common.scan import PerceptionConfig, beam_angles, beam_directions, period_steps
+from rrtq_planner.obstacle_map import MapEvent, MapperConfig, ObstacleMap, segment
+from rrtq_sim.scan import LaserScanner, cast_rays
+
+SQUARE = np.array([[2.0, -1.0], [4.0, -1.0], [4.0, 1.0], [2.0, 1.0]])
+
+
+def _returns(position, ranges):
+    hit = np.isfinite(ranges)
+    return np.asarray(position, float) + ranges[hit, None] * beam_directions(len(ranges))[hit]
+
+
+# -- ray caster ---------------------------------------------------------------------------
+
+def test_ranges_equal_the_analytic_distance_to_a_square():
+    beams = 720
+    ranges = cast_rays([0.0, 0.0], beam_directions(beams), [SQUARE], 10.0)
+    angles = beam_angles(beams)
+    # The near face x = 2 is seen for |θ| <= atan(1/2); its range is 2 / cos θ.
+    near = np.abs(angles) < math.atan2(1.0, 2.0) - 1e-9
+    np.testing.assert_allclose(ranges[near], 2.0 / np.cos(angles[near]), rtol=0, atol=1e-12)
+    # The side faces y = ±1 are seen between atan(1/4) and atan(1/2): range 1 / |sin θ|.
+    side = (np.abs(angles) > math.atan2(1.0, 2.0) + 1e-9) & (np.abs(angles) < math.atan2(1.0, 4.0))
+    assert not side.any()  # from the origin the sides are edge-on: none to see
+    # Every beam outside the square's angular extent misses: inf, not range_max.
+    miss = np.abs(angles) > math.atan2(1.0, 2.0) + 1e-9
+    assert np.all(np.isinf(ranges[miss]))
+    assert np.count_nonzero(np.isfinite(ranges)) == np.count_nonzero(~miss)
+
+
+def test_side_faces_and_range_limit():
+    directions = beam_directions(360)
+    origin = np.array([3.0, -4.0])        # below the square: sees its bottom face y = -1
+    ranges = cast_rays(origin, directions, [SQUARE], 10.0)
+    angles = beam_angles(360)
+    up = np.isfinite(ranges)
+    np.testing.assert_allclose(ranges[up], 3.0 / np.sin(angles[up]), atol=1e-12)
+    points = _returns(origin, ranges)
+    np.testing.assert_allclose(points[:, 1], -1.0, atol=1e-12)
+    assert np.all((points[:, 0] >= 2.0 - 1e-12) & (points[:, 0] <= 4.0 + 1e-12))
+    # Out of range: nothing at all, every beam inf.
+    assert np.all(np.isinf(cast_rays(origin, directions, [SQUARE], 2.9)))
+
+
+def test_seeded_noise_repeats_and_has_its_sigma():
+    config = PerceptionConfig(beams=360, range_max=10.0, noise_std=0.05)
+    scans = [LaserScanner(config, np.random.default_rng(seed)).scan([0.0, 0.0], [SQUARE])
+             for seed in (3, 3, 4)]
+    np.testing.assert_array_equal(scans[0], scans[1])
+    assert not np.array_equal(scans[0], scans[2])
+    exact = cast_rays([0.0, 0.0], beam_directions(360), [SQUARE], 10.0)
+    np.testing.assert_array_equal(np.isfinite(scans[0]), np.isfinite(exact))
+    # Many scans: the error's spread is the configured sigma.
+    scanner = LaserScanner(config, np.random.default_rng(0))
+    finite = np.isfinite(exact)
+    errors = np.concatenate([scanner.scan([0.0, 0.0], [SQUARE])[finite] - exact[finite]
+                             for _ in range(200)])
+    assert abs(errors.std() - 0.05) < 0.005 and abs(errors.mean()) < 0.005
+
+
+def test_scan_period_must_be_whole_steps():
+    assert period_steps(10.0, 0.05) == 2
+    assert period_steps(20.0, 0.05) == 1
+    with pytest.raises(ValueError, match='whole number'):
+        period_steps(30.0, 0.05)
+    with pytest.raises(ValueError, match='whole number'):
+        period_steps(7.0, 0.05)
+
+
+# -- mapper -------------------------------------------------------------------------------
+
+def _scan(position, polygons, config, rng=None):
+    ranges = cast_rays(position, beam_directions(config.beams), polygons, config.range_max)
+    if rng is not None and config.noise_std > 0:
+        finite = np.isfinite(ranges)
+        ranges[finite] += rng.normal(0.0, config.noise_std, finite.sum())
+    return ranges
+
+
+def _covers(points, polygon, tol=1e-9):
+    shape = shapely.Polygon(polygon).buffer(tol)
+    return bool(np.all(shapely.intersects_xy(shape, points[:, 0], points[:, 1])))
+
+
+@pytest.mark.parametrize('noise', [0.0, 0.02])
+def test_every_return_lies_in_a_published_polygon(noise):
+    config = MapperConfig(beams=360, range_max=8.0, noise_std=noise)
+    triangle = np.array([[-3.0, 2.0], [-1.0, 2.5], [-2.0, 4.0]])
+    circle = np.array([[5 + math.cos(a), -3 + math.sin(a)] for a in np.linspace(0, 2 * math.pi, 24,
+                                                                                 endpoint=False)])
+    truth = [SQUARE, triangle, circle]
+    mapper = ObstacleMap(config)
+    rng = np.random.default_rng(1)
+    seen = []
+    for position in ([0.0, 0.0], [0.5, -2.0], [-1.0, 0.5]):
+        ranges = _scan(position, truth, config, rng)
+        mapper.integrate(position, ranges)
+        seen.append(_returns(position, ranges))
+    polygons = [o.polygon for o in mapper.obstacles]
+    assert len(polygons) == 3  # one per true obstacle, none split, none merged
+    for points in seen:
+        for p in points:
+            assert any(_covers(p[None], poly) for poly in polygons), p
+    for poly in polygons:  # published polygons are convex and counter-clockwise
+        shape = shapely.Polygon(poly)
+        assert shape.is_valid and shape.exterior.is_ccw
+        assert abs(shape.convex_hull.area - shape.area) < 1e-9
+
+
+def test_an_obstacle_seen_from_two_poses_grows_and_keeps_its_id():
+    config = MapperConfig(beams=360, range_max=8.0, noise_std=0.01)
+    mapper = ObstacleMap(config)
+    rng = np.random.default_rng(2)
+    first = _scan([0.0, 0.0], [SQUARE], config, rng)
+    update = mapper.integrate([0.0, 0.0], first)
+    assert update.events == [(MapEvent.DETECTED, 'scan_1')]
+    area_before = shapely.Polygon(mapper.obstacles[0].polygon).area
+    second = _scan([3.0, 4.0], [SQUARE], config, rng)      # the top face: unseen so far
+    update = mapper.integrate([3.0, 4.0], second)
+    assert update.events == [(MapEvent.GROWN, 'scan_1')]
+    assert [o.id for o in mapper.obstacles] == ['scan_1']
+    polygon = mapper.obstacles[0].polygon
+    assert shapely.Polygon(polygon).area > area_before + 1.0
+    assert _covers(_returns([0.0, 0.0], first), polygon)
+    assert _covers(_returns([3.0, 4.0], second), polygon)
+    # The hull of both faces covers most of the true square (its far corner (4, -1) unseen).
+    assert shapely.Polygon(polygon).intersection(shapely.Polygon(SQUARE)).area > 0.5 * 4.0
+    # Seeing the same faces again changes nothing (no republishing on noise).
+    assert mapper.integrate([0.0, 0.0], _scan([0.0, 0.0], [SQUARE], config, rng)).events == []
+
+
+def test_freed_space_removes_the_obstacle_and_only_it():
+    config = MapperConfig(beams=360, range_max=8.0, noise_std=0.01)
+    mapper = ObstacleMap(config)
+    rng = np.random.default_rng(3)
+    other = SQUARE + [-7.0, 0.0]
+    mapper.integrate([0.0, 0.0], _scan([0.0, 0.0], [SQUARE, other], config, rng))
+    assert len(mapper.obstacles) == 2
+    ids = {o.id: o.polygon.mean(axis=0)[0] > 0 for o in mapper.obstacles}
+    # The square vanishes from the truth: the scan passes through where it was.
+    update = mapper.integrate([0.0, 0.0], _scan([0.0, 0.0], [other], config, rng))
+    removed = [i for e, i in update.events if e is MapEvent.REMOVED]
+    assert len(removed) == 1 and ids[removed[0]]
+    assert [o.id for o in mapper.obstacles] == [i for i, right in ids.items() if not right]
+
+
+def test_an_obstacle_still_seen_is_not_removed():
+    config = MapperConfig(beams=360, range_max=8.0, noise_std=0.02)
+    mapper = ObstacleMap(config)
+    rng = np.random.default_rng(4)
+    for position in ([0.0, 0.0], [0.0, 4.0], [6.0, 3.0], [6.0, -3.0], [1.0, -3.0]) * 4:
+        update = mapper.integrate(position, _scan(position, [SQUARE], config, rng))
+        assert all(e is not MapEvent.REMOVED for e, _ in update.events)
+    assert len(mapper.obstacles) == 1
+
+
+def test_seeing_through_a_gap_an_obstacle_spans_keeps_it():
+    # Two boxes 0.1 m apart seen from 6 m: their clusters' polygons overlap, one obstacle
+    # spans the gap. Seen from 1 m, beams pass through the gap and through its core, but
+    # the boxes' own returns land in it: it stays, under its id.
+    config = MapperConfig(beams=360, range_max=8.0, noise_std=0.01)
+    left = np.array([[0.0, 6.0], [1.0, 6.0], [1.0, 7.0], [0.0, 7.0]])
+    right = left + [1.1, 0.0]
+    mapper = ObstacleMap(config)
+    rng = np.random.default_rng(5)
+    mapper.integrate([1.0, 0.0], _scan([1.0, 0.0], [left, right], config, rng))
+    assert [o.id for o in mapper.obstacles] == ['scan_1']
+    ranges = _scan([1.05, 5.0], [left, right], config, rng)
+    through = np.isinf(ranges) & (np.abs(beam_angles(360) - math.pi / 2) < 0.1)
+    assert through.sum() >= config.free_beams
+    update = mapper.integrate([1.05, 5.0], ranges)
+    assert all(e is not MapEvent.REMOVED for e, _ in update.events)
+    assert 'scan_1' in [o.id for o in mapper.obstacles]
+
+
+def test_segmentation_breaks_on_range_jumps():
+    config = MapperConfig(beams=360, range_max=20.0)
+    near = np.array([[2.0, -0.5], [3.0, -0.5], [3.0, 0.5], [2.0, 0.5]])
+    far = np.array([[6.0, 0.6], [7.0, 0.6], [7.0, 2.0], [6.0, 2.0]])  # behind, beside near
+    ranges = cast_rays([0.0, 0.0], beam_directions(360), [near, far], 20.0)
+    points = np.zeros((360, 2)) + np.where(np.isfinite(ranges), ranges, 0)[:, None] * \
+        beam_directions(360)
+    clusters = segment(points, ranges, config)
+    assert len(clusters) == 2
+    # A wall all around: one cluster, wrapped.
+    box = np.array([[-5.0, -5.0], [5.0, -5.0], [5.0, 5.0], [-5.0, 5.0]])
+    ranges = cast_rays([0.0, 0.0], beam_directions(360), [box], 20.0)
+    points = ranges[:, None] * beam_directions(360)
+    assert [len(c) for c in segment(points, ranges, config)] == [360]
