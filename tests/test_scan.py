@@ -195,3 +195,38 @@ def test_segmentation_breaks_on_range_jumps():
     ranges = cast_rays([0.0, 0.0], beam_directions(360), [box], 20.0)
     points = ranges[:, None] * beam_directions(360)
     assert [len(c) for c in segment(points, ranges, config)] == [360]
+
+
+# -- scenario -----------------------------------------------------------------------------
+
+def test_the_example_scenario_loads_with_its_perception(root):
+    from rrtq_bringup.scenario import load_scenario
+    scenario = load_scenario(root / 'scenarios' / 'scan_perception.yaml')
+    assert scenario.perception == PerceptionConfig(source='scan', beams=360, range_max=8.0,
+                                                   rate=10.0, noise_std=0.02)
+    default = load_scenario(root / 'scenarios' / 'defaults_only.yaml')
+    assert default.perception.source == 'polygons'
+    assert default.perception.range_max == default.perception_radius
+
+
+@pytest.mark.parametrize('section, key, message', [
+    ('{source: scan, beams: 0}', 'perception.beams', '>= 3'),
+    ('{source: scan, beams: -4}', 'perception.beams', '>= 3'),
+    ('{source: scan, beams: 90.5}', 'perception.beams', 'integer'),
+    ('{source: lidar}', 'perception.source', 'polygons, scan'),
+    ('{source: scan, range: 0}', 'perception.range', '> 0'),
+    ('{source: scan, noise: -0.1}', 'perception.noise', '>= 0'),
+    ('{source: scan, rate: 7.0}', 'perception.rate', 'whole number'),
+    ('{source: scan, fov: 180}', 'perception.fov', ''),
+], ids=['beams0', 'beams_negative', 'beams_fraction', 'source', 'range', 'noise', 'rate', 'unknown'])
+def test_bad_perception_is_an_error_naming_file_and_key(tmp_path, section, key, message):
+    from rrtq_bringup.scenario import load_scenario
+    from rrtq_common.yaml_reader import ScenarioError
+    path = tmp_path / 'bad.yaml'
+    path.write_text('bounds: {x: [-5, 5], y: [-5, 5]}\nstart: [-4, -4]\ngoal: [4, 4]\n'
+                    f'perception: {section}\n')
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert info.value.file == str(path)
+    assert info.value.key == key
+    assert message in info.value.message
