@@ -230,3 +230,110 @@ def test_bad_perception_is_an_error_naming_file_and_key(tmp_path, section, key, 
     assert info.value.file == str(path)
     assert info.value.key == key
     assert message in info.value.message
+
+
+# -- lock-step and graph ------------------------------------------------------------------
+
+def test_a_requirement_every_k_steps_holds_only_those_steps():
+    from rrtq_common.lockstep import Requirement, StepGate
+    dt = 50_000_000
+    steps = []
+    gate = StepGate([Requirement('scan', every=2)], lockstep=True, dt_ns=dt,
+                    on_step=steps.append)
+    gate.add('odom', 0, 'o0')
+    assert steps == []                      # step 0 carries a scan: it waits for it
+    gate.add('scan', 0, 's0')
+    gate.add('odom', dt, 'o1')              # step 1 carries none: it goes at once
+    gate.add('odom', 2 * dt, 'o2')
+    assert [(s.stamp_ns, s.get('scan')) for s in steps] == [(0, 's0'), (dt, None)]
+    gate.add('scan', 2 * dt, 's2')
+    assert [(s.stamp_ns, s.get('scan')) for s in steps][-1] == (2 * dt, 's2')
+
+
+def _graph(tmp_path, perception):
+    from rrtq_bringup.graph import build_graph
+    from rrtq_bringup.scenario import load_scenario
+    from rrtq_common import topics
+    path = tmp_path / 'g.yaml'
+    path.write_text('bounds: {x: [-5, 5], y: [-5, 5]}\nstart: [-4, -4]\ngoal: [4, 4]\n'
+                    + (f'perception: {perception}\n' if perception else ''))
+    return {s.name: s for s in build_graph(load_scenario(path), 0.0, str(tmp_path / 'r.mcap'))}, topics
+
+
+def test_the_graph_starts_the_mapper_only_for_scans(tmp_path):
+    polygons, topics = _graph(tmp_path, None)
+    assert 'obstacle_mapper' not in polygons
+    assert topics.PERCEPTION_STATUS in polygons['obstacle_spawner'].publishes
+    assert set(polygons['obstacle_spawner'].params) == {'use_sim_time', 'scenario',
+                                                        'ready_when_matched'}
+    scan, _ = _graph(tmp_path, '{source: scan, beams: 90, range: 4.0, rate: 5.0, noise: 0.01}')
+    mapper, spawner = scan['obstacle_mapper'], scan['obstacle_spawner']
+    # the robot side: its odometry and its scans, no scenario file, no simulator truth
+    assert set(mapper.subscribes) == {topics.CLOCK, topics.ODOM, topics.SCAN}
+    assert 'scenario' not in mapper.params
+    assert (mapper.params['beams'], mapper.params['range_max'], mapper.params['rate'],
+            mapper.params['noise_std']) == (90, 4.0, 5.0, 0.01)
+    assert mapper.publishes == (topics.PERCEPTION_STATUS,)
+    assert topics.PERCEPTION_STATUS not in spawner.publishes and topics.SCAN in spawner.publishes
+    assert topics.SCAN in scan['recorder'].subscribes
+
+
+# -- closed loop --------------------------------------------------------------------------
+
+LOOP = """
+name: loop-scan
+seed: 5
+bounds: {x: [-10, 10], y: [-10, 10]}
+start: [-6.0, -6.0]
+goal: [6.0, 5.0]
+duration: 90.0
+perception_radius: 5.0
+robot_radius: 0.3
+perception: {source: scan, beams: 180, range: 5.0, rate: 10.0, noise: 0.01}
+plant: {model: rover, stiffness: 0.0}
+controller:
+  variant: nominal
+  M: 10.0
+  R: 0.02
+  initial_gain: [[40, 0, 30, 0], [0, 40, 0, 30]]
+  probing_std: 5.0
+planner: {steer_distance: 3.0, iterations_per_step: 20, max_nodes: 800}
+obstacles:
+  - {id: mid, polygon: [[-1, -3], [1, -3], [1, 3], [-1, 3]], appear_at: 2.0}
+"""
+
+
+def test_a_scan_run_reaches_its_goal_and_records_scans_and_map(tmp_path, root):
+    import json
+    import subprocess
+
+    from mcap.reader import make_reader
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import LaserScan
+
+    from rrtq_bringup.report import summarise
+    from rrtq_bringup.run_data import embedded_scenario, read_run
+    path = tmp_path / 'loop_scan.yaml'
+    path.write_text(LOOP)
+    out = tmp_path / 'run'
+    proc = subprocess.run([str(root / 'scripts/rrtq'), 'run', str(path), '--out', str(out),
+                           '--mode', 'composed'], capture_output=True, text=True, timeout=400)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert json.loads((out / 'summary.json').read_text())['outcome'] == 'goal_reached'
+    data = read_run(out / 'run.mcap')
+    judged = summarise(data, embedded_scenario(out / 'run.mcap'))
+    assert judged['collided'] is False and judged['min_clearance_m'] > 0.0
+    steps = data.topics['/perception/status']
+    assert data.topics['/scan'] == (steps + 1) // 2           # 10 Hz at dt = 0.05 s
+    # The robot's map is the mapper's (ids scan_<n>), never the spawner's true polygons,
+    # and it saw the wall: some map obstacle overlaps it.
+    ids = {oid for _, obstacles in data.detected for oid, _ in obstacles}
+    assert ids and all(oid.startswith('scan_') for oid in ids)
+    wall = shapely.Polygon([[-1, -3], [1, -3], [1, 3], [-1, 3]])
+    assert any(shapely.Polygon(poly).intersects(wall)
+               for _, obstacles in data.detected for _, poly in obstacles)
+    with open(out / 'run.mcap', 'rb') as fh:
+        first = next(m for _, _, m in make_reader(fh).iter_messages(topics=['/scan']))
+    scan = deserialize_message(first.data, LaserScan)
+    assert scan.header.frame_id == 'base_link' and len(scan.ranges) == 180
+    assert scan.range_max == pytest.approx(5.0) and scan.angle_min == pytest.approx(-math.pi)
