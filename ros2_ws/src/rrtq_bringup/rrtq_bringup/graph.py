@@ -17,6 +17,10 @@ follows them, so a reader knows when to wait for one. With ``planner.guidance.mo
 the planner also publishes /guidance/reference every step; the vf_lpc controller waits
 for it (and for the augmented set it names) instead of following the plan.
 
+With ``perception.source: scan`` the spawner publishes /scan (on the steps that carry one)
+instead of the robot's map, and the robot's obstacle mapper (/odom, /scan) writes
+/obstacles/detected and /perception/status in its place: spawner -> mapper -> safety.
+
 The simulator publishes the robot's measurement on /odom and the true state on
 /odom/truth: the robot's side (controller, planner, safety) reads /odom only, the
 simulator's side (spawner, injector, supervisor) /odom/truth only. The spawner's
@@ -33,9 +37,11 @@ from rrtq_bringup.scenario import Scenario, worst_case_game
 from rrtq_bringup.viz import LiveConfig, VizConfig
 from rrtq_common import topics
 from rrtq_common.run import READY_PARAMETER, Dimensions, RunConfig
+from rrtq_common.scan import PerceptionSource
 from rrtq_common.settings import to_parameters
 from rrtq_common.world_yaml import WorldSource
 from rrtq_controller.config import Variant
+from rrtq_planner.obstacle_map import MapperConfig
 from rrtq_planner.guidance import GuidanceMode
 from rrtq_sim.disturbance import DisturbanceModel
 from rrtq_sim.plant import PlantModel
@@ -102,11 +108,14 @@ def build_graph(scenario: Scenario, speed: float, output: str,
         subscribes=clock + (topics.ODOM_TRUTH,)
         + ((topics.CONTROLLER_STATE,) if worst_case else ()),
         publishes=(topics.DISTURBANCE,))
+    scan = scenario.perception.source is PerceptionSource.SCAN
     spawner = NodeSpec('obstacle_spawner', 'rrtq_sim.spawner_node', 'SpawnerNode',
-                       {**sim_time, **world}, subscribes=clock + (topics.ODOM_TRUTH,),
-                       publishes=(topics.PERCEPTION_STATUS, topics.REFEREE_STATUS))
+                       {**sim_time, **world, **(only(run, 'dt', 'seed') if scan else {})},
+                       subscribes=clock + (topics.ODOM_TRUTH,),
+                       publishes=((topics.SCAN,) if scan else (topics.PERCEPTION_STATUS,))
+                       + (topics.REFEREE_STATUS,))
     published = tuple(t for t in STEP_TOPICS if loop or t not in LOOP_TOPICS) + (
-        (topics.GUIDANCE_REFERENCE,) if gvf else ())
+        (topics.GUIDANCE_REFERENCE,) if gvf else ()) + ((topics.SCAN,) if scan else ())
     recorder = NodeSpec('recorder', 'rrtq_bringup.recorder_node', 'RecorderNode',
                         to_parameters(RecorderConfig(output=output, scenario=scenario.path)),
                         subscribes=published)
@@ -126,6 +135,16 @@ def build_graph(scenario: Scenario, speed: float, output: str,
         # A reader of every topic, gating nothing: the run never waits for the viewer.
         others.append(NodeSpec('live', 'rrtq_bringup.live_node', 'LiveNode',
                                to_parameters(LiveConfig(port=live_port))))
+    if scan:
+        p = scenario.perception
+        assert p.range_max is not None
+        mapper = MapperConfig(beams=p.beams, range_max=p.range_max, noise_std=p.noise_std,
+                              rate=p.rate)
+        others.append(NodeSpec(
+            'obstacle_mapper', 'rrtq_planner.obstacle_mapper_node', 'ObstacleMapperNode',
+            {**sim_time, **only(run, 'dt', 'lockstep'), **to_parameters(mapper)},
+            subscribes=clock + (topics.ODOM, topics.SCAN),
+            publishes=(topics.PERCEPTION_STATUS,)))
     if loop:
         others.append(NodeSpec(
             'planner', 'rrtq_planner.planner_node', 'PlannerNode',

@@ -15,10 +15,12 @@ from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point32, Polygon, PoseStamped
 from nav_msgs.msg import Odometry, Path
 from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import LaserScan
 from std_msgs.msg import Header
 from rrtq_msgs.msg import Obstacle, ObstacleArray
 
 from rrtq_common.lockstep import OnChange
+from rrtq_common.scan import PerceptionConfig, beam_angles
 
 MAP_FRAME = 'map'
 ROBOT_FRAME = 'base_link'
@@ -195,3 +197,22 @@ def changed_obstacles(msg: ObstacleArray | None) -> OnChange[list[tuple[str, np.
     if msg is None:
         return None
     return OnChange(stamp_ns(msg.header.stamp), lambda: obstacle_array(msg))
+
+
+def laser_scan_msg(ns: int, ranges: np.ndarray, config: PerceptionConfig) -> LaserScan:
+    """A 360° scan in ``base_link`` (REP-117: ``inf`` for no return), stamped ``ns``."""
+    angles = beam_angles(config.beams)
+    msg = LaserScan(angle_min=float(angles[0]), angle_max=float(angles[-1]),
+                    angle_increment=float(config.angle_increment), time_increment=0.0,
+                    scan_time=float(1.0 / config.rate), range_min=0.0,
+                    range_max=float(config.range_max or 0.0),
+                    ranges=np.asarray(ranges, dtype=np.float32))
+    msg.header.stamp = time_msg(ns)
+    msg.header.frame_id = ROBOT_FRAME
+    return msg
+
+
+def laser_scan_ranges(msg: LaserScan) -> np.ndarray:
+    """The ranges, m, as float64; below ``range_min`` or above ``range_max``: ``inf``."""
+    ranges = np.asarray(msg.ranges, dtype=float)
+    return np.where((ranges >= msg.range_min) & (ranges <= msg.range_max), ranges, np.inf)

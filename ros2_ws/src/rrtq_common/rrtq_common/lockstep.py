@@ -69,13 +69,16 @@ class Requirement:
     already produced). When ``names`` is set, the message names (by the stamp returned
     by ``names``) an on-change message of key ``followup`` that must have arrived too:
     a status that says "I published a new plan at this step" holds the step back until
-    that plan is here.
+    that plan is here. ``every``: the input comes on every ``every``-th step only (steps
+    0, every, 2 every...: a scan at a lower rate than the steps); on the others the step
+    carries None for it.
     """
 
     key: str
     lag: int = 0
     followup: str | None = None
     names: Callable[[Any], int] | None = None
+    every: int = 1
 
 
 @dataclasses.dataclass(frozen=True)
@@ -158,7 +161,7 @@ class StepInputs:
                                   'stamp_ns': stamp}
         for req in self.requirements:
             at = stamp - req.lag * self.dt_ns
-            if at < 0:
+            if at < 0 or (req.every > 1 and round(at / self.dt_ns) % req.every):
                 values[req.key] = None
                 continue
             msg = self._steps[req.key].get(at)

@@ -9,6 +9,9 @@ CMD_FORCE = '/cmd_force'
 DISTURBANCE = '/disturbance'
 GOAL_POSE = '/goal_pose'
 OBSTACLES_DETECTED = '/obstacles/detected'
+# perception.source: scan: the simulated laser scan (sensor_msgs/LaserScan, frame base_link),
+# read by the robot's obstacle mapper, which then writes /obstacles/detected.
+SCAN = '/scan'
 OBSTACLES_AUGMENTED = '/obstacles/augmented'
 PLAN = '/plan'
 PLANNER_TREE = '/planner/tree'

@@ -15,6 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from rrtq_common.geometry import point_polygon_distance
+from rrtq_common.scan import PerceptionConfig
 from rrtq_common.settings import setting
 
 __all__ = ['ObstacleSpec', 'World', 'TrueObstacles']
@@ -73,6 +74,9 @@ class World:
         the robot's disc is held back until it is not (:class:`TrueObstacles`).
     obstacles : tuple of ObstacleSpec
         Ground truth, in file order.
+    perception : PerceptionConfig
+        Where the robot's map comes from (``range_max`` set: the file's, else
+        ``perception_radius``).
     """
 
     bounds: tuple[tuple[float, float], tuple[float, float]]
@@ -86,6 +90,7 @@ class World:
                                       doc='an obstacle due to appear within this distance '
                                       "of the robot's disc is held back until it is not")
     obstacles: tuple[ObstacleSpec, ...] = ()
+    perception: PerceptionConfig = PerceptionConfig()
 
 
 class TrueObstacles:

@@ -16,6 +16,7 @@ from typing import Any
 
 from rrtq_common.geometry import point_polygon_distance, polygon_from_circle
 from rrtq_common.otte import load_otte
+from rrtq_common.scan import PerceptionConfig, PerceptionSource
 from rrtq_common.settings import setting
 from rrtq_common.world import ObstacleSpec, World
 from rrtq_common.yaml_reader import Reader, ScenarioError, frozen, join, read_yaml
@@ -23,6 +24,9 @@ from rrtq_common.yaml_reader import Reader, ScenarioError, frozen, join, read_ya
 __all__ = ['WorldSource', 'read_world', 'load_world']
 
 _TIMING_KEYS = ('appear_at', 'vanish_at', 'known')
+# perception key -> PerceptionConfig field
+_PERCEPTION_KEYS = {'source': 'source', 'beams': 'beams', 'range': 'range_max', 'rate': 'rate',
+                    'noise': 'noise_std'}
 
 
 @dataclass(frozen=True)
@@ -139,6 +143,19 @@ def _bounds(r: Reader, raw: Any) -> tuple[tuple[float, float], tuple[float, floa
     return out[0], out[1]
 
 
+def _perception(r: Reader, raw: Any, radius: float) -> PerceptionConfig:
+    """``perception: {source, beams, range, rate, noise}``; ``range`` defaults to ``radius``."""
+    key = 'perception'
+    data = r.mapping({} if raw is None else raw, key, tuple(_PERCEPTION_KEYS))
+    default = PerceptionConfig()
+    source = r.choice(data.get('source', default.source), f'{key}.source', PerceptionSource)
+    values = {name: r.setting(data, name, PerceptionConfig, key, key=file_key)
+              for file_key, name in _PERCEPTION_KEYS.items() if file_key != 'source'}
+    if values['range_max'] is None:
+        values['range_max'] = radius
+    return PerceptionConfig(source=source, **values)
+
+
 def read_world(r: Reader, data: Mapping[str, Any], base_dir: str) -> World:
     """The world keys of a parsed scenario (other keys are not looked at).
 
@@ -157,6 +174,7 @@ def read_world(r: Reader, data: Mapping[str, Any], base_dir: str) -> World:
     radii = {name: r.setting(data, name, World)
              for name in ('perception_radius', 'robot_radius', 'appear_clearance')}
     obstacles = _obstacles(r, data.get('obstacles'), base_dir)
+    perception = _perception(r, data.get('perception'), radii['perception_radius'])
     robot_radius = radii['robot_radius']
     for key, p in (('start', start), ('goal', goal)):
         (x0, x1), (y0, y1) = bounds
@@ -171,7 +189,7 @@ def read_world(r: Reader, data: Mapping[str, Any], base_dir: str) -> World:
         if (dist <= 0.0 or dist < robot_radius) and spec.ever_exists:
             raise r.error('goal', f'{goal.tolist()} is inside obstacle {spec.id!r}')
     return World(bounds=bounds, start=frozen(start), goal=frozen(goal), obstacles=obstacles,
-                 **radii)
+                 perception=perception, **radii)
 
 
 def load_world(path: str | os.PathLike[str]) -> World:

@@ -18,6 +18,7 @@ from rrtq_bringup.scenario.sections import (read_controller, read_disturbance,
                                             read_odometry_noise, read_planner, read_plant,
                                             read_safety)
 from rrtq_bringup.scenario.vf_lpc import read_guidance, read_vf_lpc
+from rrtq_common.scan import PerceptionSource, period_steps
 from rrtq_common.world import World
 from rrtq_common.world_yaml import read_world
 from rrtq_common.yaml_reader import Reader, ScenarioError, read_yaml
@@ -34,7 +35,7 @@ __all__ = ['parse_scenario', 'load_scenario', 'build_plant', 'worst_case_game',
 _TOP_KEYS = (
     'name', 'seed', 'bounds', 'start', 'goal', 'duration', 'perception_radius',
     'robot_radius', 'appear_clearance', 'plant', 'disturbance', 'controller', 'planner',
-    'obstacles', 'safety',
+    'obstacles', 'safety', 'perception',
 )  # fmt: skip
 
 
@@ -90,6 +91,11 @@ def parse_scenario(data: Any, path: str) -> Scenario:
         delay_steps(plant.actuation_delay, controller.dt)
     except ValueError as exc:
         raise r.error('plant.actuation_delay', str(exc)) from None
+    if world.perception.source is PerceptionSource.SCAN:
+        try:
+            period_steps(world.perception.rate, controller.dt)
+        except ValueError as exc:
+            raise r.error('perception.rate', str(exc)) from None
     planner, safety, goal_tolerance = read_planner(r, data.get('planner'), world)
     margins = read_safety(r, data.get('safety'), os.path.dirname(os.path.abspath(path)), plant)
     planner_raw = data.get('planner')
