@@ -89,8 +89,9 @@ def _parser() -> argparse.ArgumentParser:
                        help='also serve the graph to Foxglove on ws://127.0.0.1:PORT '
                        f'(default port {LIVE_PORT})')
     robot.add_argument('--clock', choices=('auto', 'sim', 'wall'), default='auto',
-                       help="the nodes' time: 'auto' (default) sim time when a /clock "
-                       "publisher shows up within 2 s of the start, else wall time")
+                       help="the nodes' time: 'auto' (default) waits for a publisher of /odom or "
+                       "/clock and takes sim time when /clock has one (within 2 s of /odom's), "
+                       'else wall time')
     robot.add_argument('--odometry-timeout', type=_positive, metavar='S',
                        help='run time without odometry after which the run fails as '
                        "'odometry lost' (default 10 x the controller's 3 dt)")

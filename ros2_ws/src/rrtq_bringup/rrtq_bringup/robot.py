@@ -6,9 +6,10 @@ simulator, injector, spawner or lock-step gate: whatever publishes /odom and the
 (/obstacles/detected, /perception/status) is the plant, and /cmd_force goes to it. That
 may be ``rrtq plant`` (:mod:`rrtq_bringup.plant`) or a robot.
 
-Time: the run's nodes use sim time when a /clock publisher is there at start (looked for
-for ``clock_wait_s`` of wall time, ``--clock auto``) or when ``--clock sim`` says so, wall
-time otherwise. The mission is judged from /odom (the robot has no truth: no collision
+Time: ``--clock auto`` (the default) waits for the plant, a publisher of /clock or /odom,
+then runs the nodes on sim time when /clock has a publisher (by ``clock_wait_s`` after
+/odom's appeared), on wall time otherwise; ``--clock sim`` and ``--clock wall`` decide
+without waiting. The mission is judged from /odom (the robot has no truth: no collision
 judgement here, the bounds on the measured position), its time the odometry's stamps on
 sim time, the wall time since the first odometry on wall time. It ends at the goal, at the
 scenario's duration, on Ctrl-C or SIGTERM, when a node fails, or when the odometry stops
@@ -65,7 +66,8 @@ class RobotOptions:
     out_dir: pathlib.Path
     live_port: int | None = None
     clock: ClockSource = ClockSource.AUTO
-    clock_wait_s: float = 2.0            # wall time to look for a /clock publisher (auto)
+    clock_wait_s: float = 2.0            # auto: wall time after /odom's publisher to wait
+                                         # for one of /clock
     odometry_timeout_s: float | None = None   # run time; None: LOST_STALE_MULTIPLE x stale
     start_timeout_s: float = 60.0        # wall time to wait for the first odometry
 
@@ -179,7 +181,12 @@ class RobotRun:
                                 self.options.live_port)
             params_dir = self.out / 'params'
             params_dir.mkdir(exist_ok=True)
-            for spec in graph:
+            # The controller last: its /cmd_force is what a waiting plant starts on, and by
+            # then the recorder records and the planner has its goal.
+            for spec in sorted(graph, key=lambda s: s.name == 'controller'):
+                if spec.name == 'controller':
+                    self._wait_for_nodes(executor, supervisor, [s.name for s in graph
+                                                                if s.name != 'controller'])
                 self.children[spec.name] = self._start_process(spec, params_dir, env)
             self._spin(executor)
         finally:
@@ -189,14 +196,33 @@ class RobotRun:
             context.try_shutdown()
 
     def _choose_clock(self, executor, supervisor) -> bool:
+        """Sim time or wall time (``--clock auto``: sim when the plant has a /clock publisher).
+
+        Waits for the plant: a publisher of /clock or of /odom (up to the start timeout).
+        With /odom's publisher there and no /clock publisher ``clock_wait_s`` later, the
+        plant runs on wall time.
+        """
         if self.options.clock is not ClockSource.AUTO:
             return self.options.clock is ClockSource.SIM
-        deadline = time.monotonic() + self.options.clock_wait_s
-        while time.monotonic() < deadline and not self.stop_requested:
+        start = time.monotonic()
+        odom_seen: float | None = None
+        while not self.stop_requested and time.monotonic() - start < self.options.start_timeout_s:
             if supervisor.count_publishers(topics.CLOCK) > 0:
                 return True
+            now = time.monotonic()
+            if odom_seen is None and supervisor.count_publishers(topics.ODOM) > 0:
+                odom_seen = now
+            if odom_seen is not None and now - odom_seen > self.options.clock_wait_s:
+                return False
             executor.spin_once(timeout_sec=0.05)
         return False
+
+    def _wait_for_nodes(self, executor, supervisor, names: list[str]) -> None:
+        """Spin until the nodes ``names`` are in the graph (or a signal, or a node failed)."""
+        deadline = time.monotonic() + self.options.start_timeout_s
+        while (not set(names) <= set(supervisor.get_node_names()) and not self.stop_requested
+               and self._check_children() is None and time.monotonic() < deadline):
+            executor.spin_once(timeout_sec=0.05)
 
     def _spin(self, executor) -> None:
         started = time.monotonic()

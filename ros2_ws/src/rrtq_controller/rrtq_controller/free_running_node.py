@@ -3,8 +3,9 @@
 The lock-step and paced controller (:mod:`rrtq_controller.controller_node`) answers each
 odometry message; this one steps on a timer of period Δt on the node's clock (sim time
 when the run has a /clock, else wall time) with the newest odometry, as a controller on a
-robot does. A tick without newer odometry than the last one it took leaves the command as
-it was. The age of the odometry is watched on a steady wall timer too
+robot does. A tick that finds no newer odometry than the one it took before takes the next
+as it arrives (on sim time the tick of step k comes with /clock, just before the plant's
+odometry of step k). The age of the odometry is watched on a steady wall timer too
 (:class:`rrtq_controller.staleness.OdometryWatch`), so that a plant that vanishes with its
 /clock is noticed: odometry older than ``stale_steps`` Δt makes the controller command zero,
 with ``policy_event`` ``stale_odometry`` in its /controller/state and a warning in its log,
@@ -36,6 +37,7 @@ class FreeRunningControllerNode(ControllerNode):
     def __init__(self, **kwargs: Any) -> None:
         self.newest: Step | None = None
         self.taken_ns = -1
+        self.waiting = False
         self.event = ''
         super().__init__(**kwargs)
 
@@ -50,16 +52,29 @@ class FreeRunningControllerNode(ControllerNode):
         self.create_timer(self.free.watch_period_s, self._look, clock=self._steady)
 
     def _take(self, step: Step) -> None:
-        """Keep the newest odometry (and the latest of every other input) for the next tick."""
+        """Keep the newest odometry (and the latest of every other input) for the next tick.
+
+        A tick that found no newer odometry than the one it took before waits for the next:
+        that one is taken as it arrives.
+        """
+        if not self.watch.arrived(step.stamp_ns * 1e-9, time.monotonic()):
+            return
         self.newest = step
-        self.watch.arrived(step.stamp_ns * 1e-9, time.monotonic())
+        if self.waiting:
+            self.waiting = False
+            self._control(self.newest)
 
     def _tick(self) -> None:
         if self._act(self.watch.check(time.monotonic()), tick=True):
             assert self.newest is not None
             if self.newest.stamp_ns > self.taken_ns:
-                self.taken_ns = self.newest.stamp_ns
-                self.process(self.newest)
+                self._control(self.newest)
+            else:
+                self.waiting = True
+
+    def _control(self, step: Step) -> None:
+        self.taken_ns = step.stamp_ns
+        self.process(step)
 
     def _look(self) -> None:
         self._act(self.watch.check(time.monotonic()), tick=False)
@@ -71,8 +86,10 @@ class FreeRunningControllerNode(ControllerNode):
             reason = (f'odometry {age:.3f} s old (run time), more than '
                       f'{self.free.stale_steps:g} dt = {self.watch.limit:.3f} s: commanding zero')
             self.get_logger().warning(f'{STALE_EVENT}: {reason}')
+            self.waiting = False
             self._command_zero(STALE_EVENT, reason)
         elif fresh is Freshness.STALE and tick:
+            self.waiting = False
             self._command_zero('', '')
         elif fresh is Freshness.RESUMED:
             self.get_logger().info(f'{RESUMED_EVENT}: control resumes')

@@ -62,6 +62,13 @@ class Freshness(enum.Enum):
 class OdometryWatch:
     """The run-time age of the newest odometry against ``stale_steps`` steps ``dt``.
 
+    The pace (run seconds per wall second) is measured over the last ``window`` pairs of
+    consecutive arrivals, leaving out pairs that arrived less than ``min_gap_s`` apart: a
+    burst (a late joiner's replay of the publisher's history, messages held up and then
+    delivered together) says nothing about the pace and would make it look huge, and so
+    any pause stale. Leaving a pair out can only make the pace look slower, the watch more
+    lenient.
+
     Parameters
     ----------
     dt : float
@@ -69,55 +76,63 @@ class OdometryWatch:
     stale_steps : float
         Odometry older than ``stale_steps`` Δt is stale (> 0).
     window : int
-        Arrivals over which the pace of the stamps is measured (>= 2).
+        Pairs of arrivals over which the pace is measured (>= 1).
+    min_gap_s : float
+        Wall time (s) below which a pair of arrivals is left out of the pace (>= 0).
     """
 
-    def __init__(self, dt: float, stale_steps: float = 3.0, window: int = 20) -> None:
-        if not dt > 0.0 or not stale_steps > 0.0 or window < 2:
-            raise ValueError(f'need dt > 0, stale_steps > 0, window >= 2; got {dt}, '
-                             f'{stale_steps}, {window}')
+    def __init__(self, dt: float, stale_steps: float = 3.0, window: int = 20,
+                 min_gap_s: float = 0.002) -> None:
+        if not dt > 0.0 or not stale_steps > 0.0 or window < 1 or not min_gap_s >= 0.0:
+            raise ValueError(f'need dt > 0, stale_steps > 0, window >= 1, min_gap_s >= 0; '
+                             f'got {dt}, {stale_steps}, {window}, {min_gap_s}')
         self.limit = dt * stale_steps
         """Run time (s) after which odometry is stale."""
-        self._arrivals: collections.deque[tuple[float, float]] = collections.deque(
+        self.min_gap_s = min_gap_s
+        self._pairs: collections.deque[tuple[float, float]] = collections.deque(
             maxlen=window)
+        self._last: tuple[float, float] | None = None
         self._stale = False
         self._resumed = False
 
     @property
     def pace(self) -> float:
-        """Run seconds per wall second over the recent arrivals (1 until two have come)."""
-        if len(self._arrivals) < 2:
+        """Run seconds per wall second over the recent arrivals (1 until measured)."""
+        if not self._pairs:
             return 1.0
-        (s0, w0), (s1, w1) = self._arrivals[0], self._arrivals[-1]
-        if w1 <= w0 or s1 <= s0:
-            return 1.0
-        return (s1 - s0) / (w1 - w0)
+        return sum(ds for ds, _ in self._pairs) / sum(dw for _, dw in self._pairs)
 
     @property
     def last_stamp(self) -> float | None:
         """Stamp (s, run time) of the newest odometry, None before the first."""
-        return self._arrivals[-1][0] if self._arrivals else None
+        return None if self._last is None else self._last[0]
 
-    def arrived(self, stamp: float, wall: float) -> None:
+    def arrived(self, stamp: float, wall: float) -> bool:
         """Odometry stamped ``stamp`` (s, run time) arrived at wall time ``wall`` (s).
 
-        An odometry no newer than the newest one (a repeat) does not make it fresh.
+        False for an odometry no newer than the newest one (a repeat): it does not make
+        the odometry fresh.
         """
-        if self._arrivals and stamp <= self._arrivals[-1][0]:
-            return
-        self._arrivals.append((stamp, wall))
+        if self._last is not None:
+            ds, dw = stamp - self._last[0], wall - self._last[1]
+            if ds <= 0.0:
+                return False
+            if dw >= self.min_gap_s and dw > 0.0:
+                self._pairs.append((ds, dw))
+        self._last = (stamp, wall)
         if self._stale:
             self._stale, self._resumed = False, True
+        return True
 
     def age(self, wall: float) -> float:
         """Run time (s) since the newest odometry at wall time ``wall`` (inf before any)."""
-        if not self._arrivals:
+        if self._last is None:
             return float('inf')
-        return max(0.0, wall - self._arrivals[-1][1]) * self.pace
+        return max(0.0, wall - self._last[1]) * self.pace
 
     def check(self, wall: float) -> Freshness:
         """What to do at wall time ``wall``: control, or command zero (and when to say so)."""
-        if not self._arrivals:
+        if self._last is None:
             return Freshness.NONE
         if self.age(wall) > self.limit:
             if self._stale:
