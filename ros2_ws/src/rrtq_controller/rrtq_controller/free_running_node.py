@@ -82,9 +82,10 @@ class FreeRunningControllerNode(ControllerNode):
     def _act(self, fresh: Freshness, tick: bool) -> bool:
         """Say what changed and command zero when stale; True when a tick may control."""
         if fresh is Freshness.WENT_STALE:
-            age = self.watch.age(time.monotonic())
-            reason = (f'odometry {age:.3f} s old (run time), more than '
-                      f'{self.free.stale_steps:g} dt = {self.watch.limit:.3f} s: commanding zero')
+            age, pace = self.watch.age(time.monotonic()), self.watch.pace
+            reason = (f'odometry {age:.3f} s old (run time; {age / pace:.3f} s of wall time at '
+                      f'pace {pace:.2f}), more than {self.free.stale_steps:g} dt = '
+                      f'{self.watch.limit:.3f} s: commanding zero')
             self.get_logger().warning(f'{STALE_EVENT}: {reason}')
             self.waiting = False
             self._command_zero(STALE_EVENT, reason)

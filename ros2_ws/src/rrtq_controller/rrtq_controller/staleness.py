@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import collections
 import enum
+import statistics
 from dataclasses import dataclass
 
 from rrtq_common.settings import check, setting
@@ -62,12 +63,12 @@ class Freshness(enum.Enum):
 class OdometryWatch:
     """The run-time age of the newest odometry against ``stale_steps`` steps ``dt``.
 
-    The pace (run seconds per wall second) is measured over the last ``window`` pairs of
-    consecutive arrivals, leaving out pairs that arrived less than ``min_gap_s`` apart: a
-    burst (a late joiner's replay of the publisher's history, messages held up and then
-    delivered together) says nothing about the pace and would make it look huge, and so
-    any pause stale. Leaving a pair out can only make the pace look slower, the watch more
-    lenient.
+    The pace (run seconds per wall second) is the median of Δstamp / Δwall over the last
+    ``window`` spans between arrivals, a span closing at the first arrival at least
+    ``min_gap_s`` after it opened (arrivals bunched together by a busy machine are merged
+    into one span, not dropped). The median leaves out what says nothing about the pace: a
+    late joiner's replay of the publisher's history, all at once, whose span would make
+    the pace look huge and any pause stale. Until ``min_spans`` spans are in, the pace is 1.
 
     Parameters
     ----------
@@ -76,21 +77,26 @@ class OdometryWatch:
     stale_steps : float
         Odometry older than ``stale_steps`` Δt is stale (> 0).
     window : int
-        Pairs of arrivals over which the pace is measured (>= 1).
+        Spans over which the pace is measured (>= 1).
     min_gap_s : float
-        Wall time (s) below which a pair of arrivals is left out of the pace (>= 0).
+        Wall time (s) a span lasts at least (>= 0).
+    min_spans : int
+        Spans needed before the pace is measured rather than taken as 1 (1..window).
     """
 
-    def __init__(self, dt: float, stale_steps: float = 3.0, window: int = 20,
-                 min_gap_s: float = 0.002) -> None:
-        if not dt > 0.0 or not stale_steps > 0.0 or window < 1 or not min_gap_s >= 0.0:
-            raise ValueError(f'need dt > 0, stale_steps > 0, window >= 1, min_gap_s >= 0; '
-                             f'got {dt}, {stale_steps}, {window}, {min_gap_s}')
+    def __init__(self, dt: float, stale_steps: float = 3.0, window: int = 21,
+                 min_gap_s: float = 0.002, min_spans: int = 3) -> None:
+        if (not dt > 0.0 or not stale_steps > 0.0 or window < 1 or not min_gap_s >= 0.0
+                or not 1 <= min_spans <= window):
+            raise ValueError(f'need dt > 0, stale_steps > 0, window >= 1, min_gap_s >= 0, '
+                             f'1 <= min_spans <= window; got {dt}, {stale_steps}, {window}, '
+                             f'{min_gap_s}, {min_spans}')
         self.limit = dt * stale_steps
         """Run time (s) after which odometry is stale."""
         self.min_gap_s = min_gap_s
-        self._pairs: collections.deque[tuple[float, float]] = collections.deque(
-            maxlen=window)
+        self.min_spans = min_spans
+        self._ratios: collections.deque[float] = collections.deque(maxlen=window)
+        self._opened: tuple[float, float] | None = None
         self._last: tuple[float, float] | None = None
         self._stale = False
         self._resumed = False
@@ -98,9 +104,9 @@ class OdometryWatch:
     @property
     def pace(self) -> float:
         """Run seconds per wall second over the recent arrivals (1 until measured)."""
-        if not self._pairs:
+        if len(self._ratios) < self.min_spans:
             return 1.0
-        return sum(ds for ds, _ in self._pairs) / sum(dw for _, dw in self._pairs)
+        return statistics.median(self._ratios)
 
     @property
     def last_stamp(self) -> float | None:
@@ -113,12 +119,13 @@ class OdometryWatch:
         False for an odometry no newer than the newest one (a repeat): it does not make
         the odometry fresh.
         """
-        if self._last is not None:
-            ds, dw = stamp - self._last[0], wall - self._last[1]
-            if ds <= 0.0:
-                return False
-            if dw >= self.min_gap_s and dw > 0.0:
-                self._pairs.append((ds, dw))
+        if self._last is not None and stamp <= self._last[0]:
+            return False
+        if self._opened is None:
+            self._opened = (stamp, wall)
+        elif wall - self._opened[1] >= max(self.min_gap_s, 1e-9):
+            self._ratios.append((stamp - self._opened[0]) / (wall - self._opened[1]))
+            self._opened = (stamp, wall)
         self._last = (stamp, wall)
         if self._stale:
             self._stale, self._resumed = False, True
