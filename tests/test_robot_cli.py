@@ -248,3 +248,17 @@ def test_killed_plant_stops_the_push_within_3dt_and_fails_the_run(tmp_path):
     late = [(t, f.x, f.y) for t, f in commands if t > last_odom + 3 * DT + 0.35]
     assert all(x == 0.0 and y == 0.0 for _, x, y in late), late
     assert commands[-1][1].x == 0.0 and commands[-1][1].y == 0.0
+
+
+@pytest.mark.parametrize('command', ['robot', 'plant'])
+def test_bad_input_exits_2_naming_the_key_and_starts_nothing(tmp_path, command):
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text(TINY.replace('duration: 40.0', 'duration: 40.0\nspeeed: 3'))
+    out = tmp_path / 'out'
+    args = [RRTQ, command, str(bad)] + (['--out', str(out)] if command == 'robot' else [])
+    done = subprocess.run(args, capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and 'speeed' in done.stderr, done.stderr
+    assert not out.exists()
+    missing = subprocess.run([RRTQ, command, str(tmp_path / 'gone.yaml')],
+                             capture_output=True, text=True, timeout=60)
+    assert missing.returncode == 2 and 'gone.yaml' in missing.stderr, missing.stderr
