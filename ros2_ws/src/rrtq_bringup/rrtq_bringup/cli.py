@@ -1,12 +1,14 @@
 """``rrtq``: run scenarios, plan, report and benchmark (Monte Carlo).
 
-Exit codes: 0 success, 1 failed mission, 2 bad input (nothing started).
+Exit codes: 0 success, 1 failed mission (also a run stopped by Ctrl-C or SIGTERM), 2 bad
+input (nothing started). ``rrtq plant`` exits 0 at its duration or on Ctrl-C/SIGTERM.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import pathlib
 import sys
 
@@ -76,6 +78,31 @@ def _parser() -> argparse.ArgumentParser:
                      help='also serve the running graph to Foxglove over its WebSocket '
                      f'protocol on ws://127.0.0.1:PORT (default port {LIVE_PORT}); in '
                      'lock-step the view follows the run as fast as it goes')
+    robot = sub.add_parser('robot', help="the robot's side alone (planner, controller, "
+                           'safety, recorder) against an external /odom and perception')
+    robot.add_argument('scenario', type=pathlib.Path, help='scenario YAML file')
+    robot.add_argument('--out', type=pathlib.Path,
+                       help='output directory (default: runs/<scenario name>-robot)')
+    robot.add_argument('--overwrite', action='store_true',
+                       help='replace an existing recording in the output directory')
+    robot.add_argument('--live', type=_port, nargs='?', const=LIVE_PORT, metavar='PORT',
+                       help='also serve the graph to Foxglove on ws://127.0.0.1:PORT '
+                       f'(default port {LIVE_PORT})')
+    robot.add_argument('--clock', choices=('auto', 'sim', 'wall'), default='auto',
+                       help="the nodes' time: 'auto' (default) waits for a publisher of /odom or "
+                       "/clock and takes sim time when /clock has one (within 2 s of /odom's), "
+                       'else wall time')
+    robot.add_argument('--odometry-timeout', type=_positive, metavar='S',
+                       help='run time without odometry after which the run fails as '
+                       "'odometry lost' (default 10 x the controller's 3 dt)")
+    plant = sub.add_parser('plant', help="the scenario's plant, disturbance injector and "
+                           'obstacle spawner as one process for rrtq robot')
+    plant.add_argument('scenario', type=pathlib.Path, help='scenario YAML file')
+    plant.add_argument('--speed', type=_positive, default=1.0,
+                       help='pace factor against real time (default 1)')
+    plant.add_argument('--command-timeout', type=_positive, metavar='S',
+                       help='sim time after the last /cmd_force after which zero force is '
+                       'held (default 0.5)')
     sub.add_parser('plan', help='the RRT^X planner alone on a scenario or Otte file; '
                    "'rrtq plan --help' for its options", add_help=False)
     sub.add_parser('bench', help='Monte Carlo over seeds and random obstacle layouts; '
@@ -132,6 +159,58 @@ def cmd_run(args: argparse.Namespace) -> int:
     return code
 
 
+def cmd_robot(args: argparse.Namespace) -> int:
+    from rrtq_bringup.orchestrator import BadInput, check_supported
+    from rrtq_bringup.robot import ClockSource, RobotOptions, RobotRun
+    from rrtq_bringup.scenario import ScenarioError, load_scenario
+
+    try:
+        scenario = load_scenario(args.scenario)
+        check_supported(scenario)
+        out = args.out or pathlib.Path('runs') / f'{scenario.name}-robot'
+        if (out / 'run.mcap').exists() and not args.overwrite:
+            raise BadInput(f'{out / "run.mcap"} exists; choose another --out or pass '
+                           '--overwrite')
+        if args.live is not None and not _port_free(args.live):
+            raise BadInput(f'--live: port {args.live} on 127.0.0.1 is in use')
+    except (ScenarioError, BadInput) as exc:
+        print(f'rrtq: error: {exc}', file=sys.stderr)
+        return EXIT_BAD_INPUT
+    for stale in ('run.mcap', 'summary.json'):
+        (out / stale).unlink(missing_ok=True)
+    options = RobotOptions(out_dir=out, live_port=args.live, clock=ClockSource(args.clock),
+                           odometry_timeout_s=args.odometry_timeout)
+    domain = os.environ.get('ROS_DOMAIN_ID', '0') or '0'
+    print(f'rrtq: robot side of {scenario.name} on ROS_DOMAIN_ID={domain} -> {out}',
+          file=sys.stderr)
+    code = RobotRun(scenario, options).execute()
+    summary = json.loads((out / 'summary.json').read_text())
+    print(json.dumps({k: summary[k] for k in ('success', 'outcome', 'reason', 'sim_time_s',
+                                               'clock', 'recording')}))
+    if summary.get('failed_node'):
+        failed = summary['failed_node']
+        print(f"rrtq: node '{failed['node']}' {failed['status']}; last lines of its log:",
+              file=sys.stderr)
+        print('\n'.join('  ' + line for line in failed['log_tail']), file=sys.stderr)
+    return code
+
+
+def cmd_plant(args: argparse.Namespace) -> int:
+    from rrtq_bringup.orchestrator import BadInput, check_supported
+    from rrtq_bringup.plant_process import PlantProcessConfig, run_plant
+    from rrtq_bringup.scenario import ScenarioError, load_scenario
+
+    try:
+        scenario = load_scenario(args.scenario)
+        check_supported(scenario)
+    except (ScenarioError, BadInput) as exc:
+        print(f'rrtq: error: {exc}', file=sys.stderr)
+        return EXIT_BAD_INPUT
+    config = (PlantProcessConfig(command_timeout_s=args.command_timeout)
+              if args.command_timeout else PlantProcessConfig())
+    return run_plant(scenario, args.speed, config)
+
+
 def cmd_report(args: argparse.Namespace) -> int:
     if not args.recording.is_file():
         print(f'rrtq: error: {args.recording}: no such recording', file=sys.stderr)
@@ -167,7 +246,8 @@ def main(argv: list[str] | None = None) -> int:
         from rrtq_bringup.identify import main as identify_main
         return identify_main(argv[1:])
     args = _parser().parse_args(argv)
-    return {'run': cmd_run, 'report': cmd_report}[args.command](args)
+    return {'run': cmd_run, 'robot': cmd_robot, 'plant': cmd_plant,
+            'report': cmd_report}[args.command](args)
 
 
 if __name__ == '__main__':

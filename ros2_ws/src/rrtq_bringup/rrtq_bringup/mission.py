@@ -28,6 +28,8 @@ class Outcome(enum.StrEnum):
     OUT_OF_BOUNDS = 'out_of_bounds'
     DURATION = 'duration_elapsed'
     NODE_FAILED = 'node_failed'
+    ODOMETRY_LOST = 'odometry_lost'
+    """``rrtq robot``: the odometry stopped before the mission ended (the plant vanished)."""
     INTERRUPTED = 'interrupted'
 
 

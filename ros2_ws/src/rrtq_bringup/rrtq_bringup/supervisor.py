@@ -18,10 +18,12 @@ from rrtq_common.executors import NODE_OPTIONS
 class SupervisorNode(Node):
     """Feeds the mission monitor from /odom/truth, /cmd_force, /controller/state, /planner/stats.
 
-    The referee judges the true state, never the robot's measurement (/odom).
+    The referee judges the true state, never the robot's measurement (/odom); ``rrtq robot``,
+    which has no truth, judges its mission from ``odometry`` = /odom.
     """
 
-    def __init__(self, monitor: MissionMonitor, goal: np.ndarray, **kwargs) -> None:
+    def __init__(self, monitor: MissionMonitor, goal: np.ndarray,
+                 odometry: str = topics.ODOM_TRUTH, **kwargs) -> None:
         super().__init__('supervisor', **NODE_OPTIONS, **kwargs)
         self.monitor = monitor
         self.goal_pub = self.create_publisher(PoseStamped, topics.GOAL_POSE, qos.LATCHED)
@@ -33,8 +35,7 @@ class SupervisorNode(Node):
         self.pause_pub = self.create_publisher(Empty, topics.SIMULATOR_PAUSE, qos.LATCHED)
         self.last_odom_ns = -1
         # The true odometry as bytes, read as the step's nodes read /odom (rrtq_common.inputs).
-        self.create_subscription(Odometry, topics.ODOM_TRUTH, self.on_odom_bytes, qos.STREAM,
-                                 raw=True)
+        self.create_subscription(Odometry, odometry, self.on_odom_bytes, qos.STREAM, raw=True)
         self.create_subscription(WrenchStamped, topics.CMD_FORCE, self.on_cmd, qos.STREAM)
         self.create_subscription(ControllerState, topics.CONTROLLER_STATE, self.on_state,
                                  qos.STREAM)

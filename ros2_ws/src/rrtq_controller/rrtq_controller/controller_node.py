@@ -113,6 +113,10 @@ class ControllerNode(Node):
             + ((Input('reference', GuidanceReference, topics.GUIDANCE_REFERENCE, qos.STREAM),
                 Input('augmented', ObstacleArray, topics.OBSTACLES_AUGMENTED, qos.LATCHED))
                if vf_lpc else ()))
+        self._start_timers(run)
+
+    def _start_timers(self, run: RunConfig) -> None:
+        """Paced mode: the odometry watchdog (lock-step has no timer)."""
         if not run.lockstep:
             self.create_timer(0.05, self._watch_odometry)
 
