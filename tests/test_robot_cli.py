@@ -170,10 +170,16 @@ def read(recording, topics):
                 for _, c, m, msg in reader.iter_decoded_messages(topics=topics)]
 
 
-def run_pair(tmp_path, speed, during=None):
+# The same mission on the MuJoCo plant, the robot mapping its obstacles from a laser scan.
+TINY_PHYSICAL = TINY.replace('plant: {model: rover, stiffness: 0.0}',
+                             'plant: {model: mujoco}\n'
+                             'perception: {source: scan, beams: 180, range: 3.0, rate: 10}')
+
+
+def run_pair(tmp_path, speed, during=None, text=TINY):
     """Plant then robot on the tiny scenario; ``during(plant, plant_log)`` once it steps."""
     scenario = tmp_path / 'tiny.yaml'
-    scenario.write_text(TINY)
+    scenario.write_text(text)
     out = tmp_path / 'robot'
     with pair_domain() as domain:
         env = {**os.environ, 'ROS_DOMAIN_ID': str(domain),
@@ -216,6 +222,25 @@ def test_robot_reaches_the_goal_against_a_separate_plant_process(tmp_path):
     assert max(forces) > 1.0
     last = [m for _, t, m in seen if t == '/odom'][-1].pose.pose.position
     assert ((last.x - 2.0) ** 2 + (last.y - 1.5) ** 2) ** 0.5 < 0.5 + 0.1
+
+
+def test_robot_maps_a_scan_of_a_mujoco_plant_and_reaches_the_goal(tmp_path):
+    # Issue 32: `rrtq plant` (MuJoCo, scan perception, 5 x real time through /clock) in one
+    # process, `rrtq robot` (its obstacle_mapper turning /scan into the map) in another.
+    code, summary, recording, log = run_pair(tmp_path, speed=5, text=TINY_PHYSICAL)
+    assert code == 0, log
+    assert summary['outcome'] == 'goal_reached' and summary['clock'] == 'sim', summary
+    names = ['/scan', '/obstacles/detected', '/odom', '/cmd_force']
+    seen = read(recording, names + ['/plant/contact'])
+    counts = {t: sum(1 for _, topic, _ in seen if topic == t) for t in names + ['/plant/contact']}
+    assert all(counts[t] > 0 for t in names), counts
+    assert counts['/plant/contact'] == 0, counts     # the plant felt no contact
+    assert counts['/scan'] > 10, counts
+    scans = [m for _, t, m in seen if t == '/scan']
+    assert scans[0].header.frame_id == 'base_link' and len(scans[0].ranges) == 180
+    # The map holds the box as the scan saw it: a polygon around the box's seen faces.
+    detected = [m for _, t, m in seen if t == '/obstacles/detected']
+    assert any(o.polygon.points for m in detected for o in m.obstacles)
 
 
 def test_killed_plant_stops_the_push_within_3dt_and_fails_the_run(tmp_path):
