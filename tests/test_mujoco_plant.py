@@ -218,7 +218,7 @@ def test_a_bad_mjcf_file_is_refused_naming_it(tmp_path, text, words):
 SCENARIO = {
     'bounds': {'x': [-10, 10], 'y': [-10, 10]}, 'start': [-5.0, 0.0], 'goal': [5.0, 0.0],
     'robot_radius': 0.3,
-    'plant': {'model': 'mujoco', 'mass': 30.0, 'damping': 10.0, 'friction': 5.0},
+    'plant': {'model': 'mujoco', 'mass': 30.0, 'damping': 10.0, 'friction': 0.2},
     'obstacles': [{'id': 'box', 'polygon': [[-1, -1], [1, -1], [1, 1], [-1, 1]]}],
 }
 GOOD_MJCF = """<mujoco><worldbody><body name="base">
@@ -235,10 +235,10 @@ def scenario(tmp_path, **plant):
 
 def test_plant_model_mujoco_loads_with_its_keys(tmp_path):
     from rrtq_sim.plant import PlantModel
-    sc = scenario(tmp_path, mass=30.0, damping=10.0, friction=5.0)
+    sc = scenario(tmp_path, mass=30.0, damping=10.0, friction=0.2)
     p = sc.plant
     assert p.model is PlantModel.MUJOCO and p.mjcf is None
-    assert (p.mass, p.damping, p.friction, p.stiffness) == (30.0, 10.0, 5.0, 0.0)
+    assert (p.mass, p.damping, p.friction, p.stiffness) == (30.0, 10.0, 0.2, 0.0)
     a, b = rover_matrices(30.0, 0.0, 10.0)
     assert np.array_equal(p.A, a) and np.array_equal(p.B, b)
 
@@ -286,6 +286,21 @@ def test_rrtq_run_exits_2_on_a_missing_mjcf_naming_the_file_and_the_key(tmp_path
     assert proc.returncode == 2, proc.stderr
     assert str(path) in proc.stderr and 'plant.mjcf' in proc.stderr and 'nope.xml' in proc.stderr
     assert not out.exists()
+
+
+def test_the_friction_coefficient_is_mu_m_g_per_axis():
+    # The scenario's friction is the dimensionless coefficient; the joints resist mu m g:
+    # mu = 0.05 on 40 kg is 19.62 N, which holds 19 N and lets 21 N through at (21 - F_c)/m.
+    from rrtq_sim.mujoco_model import coulomb_force
+    assert coulomb_force(0.1, 40.0) == pytest.approx(39.24)
+    level = coulomb_force(0.05, 40.0)
+    mj = plant(mass=40.0, damping=0.0, friction=level)
+    x = np.zeros(4)
+    for _ in range(20):
+        x = mj.step(x, [19.0, -19.0], None)
+    assert np.max(np.abs(x)) < 1e-9, x
+    x = mj.step(x, [21.0, 0.0], None)
+    assert x[2] == pytest.approx((21.0 - level) / 40.0 * DT, rel=1e-3)
 
 
 def test_the_example_scenario_loads(root):
@@ -337,7 +352,7 @@ plant:
   model: mujoco
   mass: 40.0
   damping: 10.0
-  friction: 20.0
+  friction: 0.05
   force_limit: 200.0
   actuation_delay: 0.1
   odometry_noise: {position: 0.01, velocity: 0.01}

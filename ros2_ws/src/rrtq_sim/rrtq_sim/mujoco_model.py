@@ -29,8 +29,8 @@ import shapely
 
 from rrtq_common.world import ObstacleSpec
 
-__all__ = ['BASE_BODY', 'ACTUATORS', 'SLIDE_JOINTS', 'MIN_RADIUS', 'PRISM_Z', 'SUBSTEPS',
-           'BaseParameters', 'MjcfError', 'base_mjcf', 'obstacle_pieces', 'build_model',
+__all__ = ['BASE_BODY', 'GRAVITY', 'ACTUATORS', 'SLIDE_JOINTS', 'MIN_RADIUS', 'PRISM_Z',
+           'SUBSTEPS', 'coulomb_force', 'BaseParameters', 'MjcfError', 'base_mjcf', 'obstacle_pieces', 'build_model',
            'obstacle_geom_name']
 
 BASE_BODY = 'base'
@@ -71,6 +71,20 @@ class BaseParameters:
     damping: float
     friction: float
     radius: float
+
+
+GRAVITY = 9.81
+"""m/s², for the friction coefficient's normal force (the model itself has gravity off)."""
+
+
+def coulomb_force(mu: float, mass: float) -> float:
+    """The Coulomb friction force per axis, N, of coefficient ``mu`` on a base of ``mass`` kg.
+
+    The planar base has no contact with a floor (gravity off: the slide joints carry it),
+    so the scenario's coefficient becomes the joints' friction loss mu m g, per axis (a
+    friction square where a floor would give a disc of the same radius).
+    """
+    return float(mu) * float(mass) * GRAVITY
 
 
 def base_mjcf(base: BaseParameters, timestep: float) -> str:

@@ -59,8 +59,9 @@ class PlantConfig:
                                  doc='saturation per axis (inf: none)')
     actuation_delay: float = setting(0.0, unit='s', low=0.0, doc='the force commanded at a '
                                      'step acts this much later (a multiple of the step)')
-    friction: float = setting(0.0, unit='N', low=0.0, doc='mujoco: Coulomb friction per axis, '
-                              'the largest force the base resists at rest')
+    friction: float = setting(0.0, unit='1', low=0.0, doc='mujoco: Coulomb friction '
+                              'coefficient mu; per axis the base resists at rest up to '
+                              'mu m g (g = 9.81 m/s^2)')
     mjcf: str | None = setting(None, doc='mujoco: a user MJCF file (body base, actuators fx '
                                'and fy); none: the shipped planar base')
 

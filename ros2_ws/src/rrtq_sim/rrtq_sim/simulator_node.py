@@ -38,7 +38,7 @@ from rrtq_sim.disturbance import DisturbanceConfig
 from rrtq_common.world import TrueObstacles
 from rrtq_common.world_yaml import WorldSource, load_world
 from rrtq_sim.conversions import plant_contact_msg
-from rrtq_sim.mujoco_model import BaseParameters
+from rrtq_sim.mujoco_model import BaseParameters, coulomb_force
 from rrtq_sim.mujoco_plant import MujocoPlant
 from rrtq_sim.odometry import OdometryNoise, OdometryNoiseConfig, odometry_rng
 from rrtq_sim.plant import Plant, PlantConfig, PlantModel
@@ -67,7 +67,8 @@ class SimulatorNode(Node):
         if plant.model is PlantModel.MUJOCO:
             world = load_world(declare_config(self, WorldSource).scenario)
             physics = MujocoPlant(world.obstacles, run.dt, plant.force_limit, disturbance.F,
-                                  BaseParameters(plant.mass, plant.damping, plant.friction,
+                                  BaseParameters(plant.mass, plant.damping,
+                                                 coulomb_force(plant.friction, plant.mass),
                                                  world.robot_radius), plant.mjcf)
             self.sim = Simulation(physics, self.config.start, plant.spring_anchor,
                                   self.config.duration, delay, TrueObstacles.for_scenario(world))
