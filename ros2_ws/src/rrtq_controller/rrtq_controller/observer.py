@@ -174,6 +174,8 @@ class Observer:
             if not p:
                 break
             a = _ar_coefficients(target - regress @ w, usable, p)
+        if not np.all(np.isfinite(w)):
+            return None                   # no model in data that cannot give one
         e = (target - regress[:, :-1] @ w[:-1])[same]     # the steady push included
         return OneStepModel(phi=w[:n].T.copy(),
                             gammas=w[n:-1].reshape(J + 1, m, n).transpose(0, 2, 1),
@@ -357,15 +359,21 @@ def _ar_filter(z: Array, a: Array) -> Array:
 
 def _ar_coefficients(e: Array, usable: NDArray[np.bool_], p: int) -> Array:
     """The AR coefficients of e_k = Σ a_i e_{k-i} + ε_k, pooled over the components (unit spread each)."""
-    r = e / (e[usable].std(axis=0) + 1e-300)
+    spread = e[usable].std(axis=0)
+    moving = spread > 0.0              # a component the model fits exactly carries no AR
+    if not moving.any():
+        return np.zeros(p)
+    r = e[:, moving] / spread[moving]
     lags = np.stack([np.vstack([np.zeros((i, r.shape[1])), r[:-i]]) for i in range(1, p + 1)],
                     axis=-1)[usable]
     gram = np.einsum('kip,kiq->pq', lags, lags)
-    return np.asarray(np.linalg.solve(gram + 1e-9 * np.eye(p), np.einsum('kip,ki->p', lags, r[usable])),
-                      dtype=float)
+    a = np.linalg.solve(gram + 1e-9 * np.eye(p), np.einsum('kip,ki->p', lags, r[usable]))
+    return np.asarray(a, dtype=float) if np.all(np.isfinite(a)) else np.zeros(p)
 
 
 def _invertible(gamma: Array) -> bool:
     """Whether Γ has full column rank, numerically (every force direction moves the robot)."""
+    if not np.all(np.isfinite(gamma)):
+        return False
     s = np.linalg.svd(gamma, compute_uv=False)
     return bool(s.min() > 1e-6 * s.max())

@@ -166,3 +166,22 @@ def test_the_steady_push_is_the_constant_push_in_newtons():
     mean, error = obs.steady_push(20)
     assert mean == pytest.approx(40.0 * 0.3 * F[2:, 0], abs=0.05)
     assert np.all(np.abs(mean) > 10 * error)
+
+
+def test_a_robot_that_does_not_move_gives_no_model_and_no_error():
+    # Coulomb friction above every command (the MuJoCo plant at mu = 0.3): the odometry is
+    # constant while the forces vary. The residual is rounding noise, whose AR fit had a
+    # unit root that filtered everything to zero, and the model came out NaN ("SVD did not
+    # converge" ended a run). Such data say nothing of the plant: no model.
+    rng = np.random.default_rng(0)
+    observer = Observer(4, 2)
+    x = np.array([3.0, -2.0, 0.0, 0.0])
+    for _ in range(600):
+        observer.record(x, rng.normal(0.0, 20.0, 2), 0)
+    with np.errstate(all='ignore'):
+        assert observer.update() is False
+    assert observer.model is None
+    model = Observer(4, 2).identify(np.tile(x, (600, 1)), rng.normal(0.0, 20.0, (600, 2)),
+                                    np.zeros(600, dtype=np.int64))
+    assert model is None or (np.all(np.isfinite(model.phi)) and np.all(np.isfinite(model.gamma))
+                             and np.abs(model.gamma).max() < 1e-9)   # forces moved nothing
