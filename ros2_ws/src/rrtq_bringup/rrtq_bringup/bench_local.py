@@ -18,7 +18,7 @@ from collections import deque
 from typing import Any, TextIO
 
 from rrtq_bringup.bench_table import COMPLETED
-from rrtq_bringup.orchestrator import _die_with_parent
+from rrtq_bringup.node_processes import die_with_parent
 
 GRACE_S = 30.0       # wall time an interrupted run gets to write its summary
 
@@ -47,7 +47,7 @@ def start_run(scenario: pathlib.Path, out: pathlib.Path) -> subprocess.Popen:
     # A session of its own: a terminal's Ctrl-C reaches the bench, which passes it on.
     proc = subprocess.Popen(run_command(scenario, out), env=env, stdin=subprocess.DEVNULL,
                             stdout=log, stderr=subprocess.STDOUT, start_new_session=True,
-                            preexec_fn=_die_with_parent)
+                            preexec_fn=die_with_parent)
     log.close()
     return proc
 

@@ -9,7 +9,6 @@ A child process gets SIGTERM from the kernel if this process dies, even by SIGKI
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import dataclasses
 import enum
 import fcntl
@@ -24,9 +23,9 @@ import sys
 import time
 from collections.abc import Iterator
 
-import yaml
 
 from rrtq_bringup.graph import NodeSpec, build_graph, closed_loop
+from rrtq_bringup.node_processes import first_failed, start_node, stop_nodes
 from rrtq_bringup.mission import MissionConfig, MissionMonitor, Outcome
 from rrtq_bringup.run_calibration import write_run_calibration
 from rrtq_bringup.scenario import Scenario
@@ -104,11 +103,6 @@ def ros_env(domain: int) -> dict[str, str]:
     return {**os.environ, 'ROS_DOMAIN_ID': str(domain),
             'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
             'RMW_IMPLEMENTATION': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')}
-
-
-def _die_with_parent() -> None:
-    libc = ctypes.CDLL('libc.so.6', use_errno=True)
-    libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
 
 
 def check_supported(scenario: Scenario) -> None:
@@ -228,14 +222,8 @@ class Run:
 
     def _start_process(self, spec: NodeSpec, params_dir: pathlib.Path,
                        env: dict[str, str]) -> subprocess.Popen:
-        params_file = params_dir / f'{spec.name}.yaml'
-        params_file.write_text(yaml.safe_dump({spec.name: {'ros__parameters': spec.params}}))
-        log = open(self.out / 'logs' / f'{spec.name}.log', 'wb')  # noqa: SIM115
-        cmd = [sys.executable, '-m', spec.module, '--ros-args', '--params-file',
-               str(params_file)]
-        return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent,
-                                start_new_session=True, pass_fds=(lock_fd(self.domain),))
+        return start_node(spec, params_dir, self.out / 'logs', env,
+                          pass_fds=(lock_fd(self.domain),))
 
     def _composed_failure(self, exc: Exception) -> None:
         """A callback raised in composed mode: the run fails naming the node's module."""
@@ -251,28 +239,11 @@ class Run:
         self.monitor.finish(Outcome.NODE_FAILED, f"node '{where}' raised {type(exc).__name__}")
 
     def _check_children(self) -> dict | None:
-        for name, proc in self.children.items():
-            code = proc.poll()
-            if code is not None:
-                status = (f'was killed by {signal.Signals(-code).name}' if code < 0
-                          else f'exited with status {code}')
-                log = (self.out / 'logs' / f'{name}.log').read_text(errors='replace')
-                return {'node': name, 'status': status, 'exit_code': code,
-                        'log_tail': log.strip().splitlines()[-15:]}
-        return None
+        return first_failed(self.children, self.out / 'logs')
 
     def _stop_processes(self) -> None:
         """Stop the graph, the simulator first and the recorder last (it drains)."""
-        order = sorted(self.children, key=lambda n: (n == 'recorder', n != 'simulator'))
-        for name in order:
-            proc = self.children[name]
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=10.0)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+        stop_nodes(self.children, first='simulator')
 
     # -- composed mode --------------------------------------------------------------------
     def _run_composed(self, domain: int) -> None:

@@ -28,14 +28,13 @@ import os
 import pathlib
 import signal
 import subprocess
-import sys
 import time
 
-import yaml
 
 from rrtq_bringup.graph import NodeSpec, build_graph
 from rrtq_bringup.mission import MissionConfig, MissionMonitor, Outcome
-from rrtq_bringup.orchestrator import EXIT_FAILED, EXIT_SUCCESS, _die_with_parent
+from rrtq_bringup.node_processes import first_failed, start_node, stop_nodes
+from rrtq_bringup.orchestrator import EXIT_FAILED, EXIT_SUCCESS
 from rrtq_bringup.scenario import Scenario
 from rrtq_common import topics
 from rrtq_common.run import READY_PARAMETER
@@ -255,38 +254,14 @@ class RobotRun:
     # -- processes ----------------------------------------------------------------------
     def _start_process(self, spec: NodeSpec, params_dir: pathlib.Path,
                        env: dict[str, str]) -> subprocess.Popen:
-        params_file = params_dir / f'{spec.name}.yaml'
-        params_file.write_text(yaml.safe_dump({spec.name: {'ros__parameters': spec.params}}))
-        log = open(self.out / 'logs' / f'{spec.name}.log', 'wb')  # noqa: SIM115
-        cmd = [sys.executable, '-m', spec.module, '--ros-args', '--params-file',
-               str(params_file)]
-        return subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
-                                stdin=subprocess.DEVNULL, preexec_fn=_die_with_parent,
-                                start_new_session=True)
+        return start_node(spec, params_dir, self.out / 'logs', env)
 
     def _check_children(self) -> dict | None:
-        for name, proc in self.children.items():
-            code = proc.poll()
-            if code is not None:
-                status = (f'was killed by {signal.Signals(-code).name}' if code < 0
-                          else f'exited with status {code}')
-                log = (self.out / 'logs' / f'{name}.log').read_text(errors='replace')
-                return {'node': name, 'status': status, 'exit_code': code,
-                        'log_tail': log.strip().splitlines()[-15:]}
-        return None
+        return first_failed(self.children, self.out / 'logs')
 
     def _stop_processes(self) -> None:
         """Stop the nodes, the controller first (no command outlives the run), the recorder last."""
-        order = sorted(self.children, key=lambda n: (n == 'recorder', n != 'controller'))
-        for name in order:
-            proc = self.children[name]
-            if proc.poll() is None:
-                proc.send_signal(signal.SIGINT)
-                try:
-                    proc.wait(timeout=10.0)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+        stop_nodes(self.children, first='controller')
 
     # -- summary --------------------------------------------------------------------------
     def _write_summary(self, wall_s: float) -> int:
