@@ -122,6 +122,17 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _report(out: pathlib.Path, keys: tuple[str, ...]) -> None:
+    """Print the run's summary (``keys`` of OUT/summary.json) and a failed node's log tail."""
+    summary = json.loads((out / 'summary.json').read_text())
+    print(json.dumps({k: summary[k] for k in keys}))
+    if summary.get('failed_node'):
+        failed = summary['failed_node']
+        print(f"rrtq: node '{failed['node']}' {failed['status']}; last lines of its log:",
+              file=sys.stderr)
+        print('\n'.join('  ' + line for line in failed['log_tail']), file=sys.stderr)
+
+
 def cmd_run(args: argparse.Namespace) -> int:
     from rrtq_bringup.orchestrator import BadInput, Run, RunMode, RunOptions, check_supported
     from rrtq_bringup.scenario import ScenarioError, load_scenario
@@ -148,14 +159,7 @@ def cmd_run(args: argparse.Namespace) -> int:
         print(f'rrtq: live view on ws://127.0.0.1:{args.live} (Foxglove: Open connection, '
               'Foxglove WebSocket)', file=sys.stderr)
     code = Run(scenario, options).execute()
-    summary = json.loads((out / 'summary.json').read_text())
-    print(json.dumps({k: summary[k] for k in ('success', 'outcome', 'reason', 'sim_time_s',
-                                               'sim_speedup', 'recording')}))
-    if summary.get('failed_node'):
-        failed = summary['failed_node']
-        print(f"rrtq: node '{failed['node']}' {failed['status']}; last lines of its log:",
-              file=sys.stderr)
-        print('\n'.join('  ' + line for line in failed['log_tail']), file=sys.stderr)
+    _report(out, ('success', 'outcome', 'reason', 'sim_time_s', 'sim_speedup', 'recording'))
     return code
 
 
@@ -184,14 +188,7 @@ def cmd_robot(args: argparse.Namespace) -> int:
     print(f'rrtq: robot side of {scenario.name} on ROS_DOMAIN_ID={domain} -> {out}',
           file=sys.stderr)
     code = RobotRun(scenario, options).execute()
-    summary = json.loads((out / 'summary.json').read_text())
-    print(json.dumps({k: summary[k] for k in ('success', 'outcome', 'reason', 'sim_time_s',
-                                               'clock', 'recording')}))
-    if summary.get('failed_node'):
-        failed = summary['failed_node']
-        print(f"rrtq: node '{failed['node']}' {failed['status']}; last lines of its log:",
-              file=sys.stderr)
-        print('\n'.join('  ' + line for line in failed['log_tail']), file=sys.stderr)
+    _report(out, ('success', 'outcome', 'reason', 'sim_time_s', 'clock', 'recording'))
     return code
 
 

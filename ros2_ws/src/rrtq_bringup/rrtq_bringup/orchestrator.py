@@ -105,6 +105,16 @@ def ros_env(domain: int) -> dict[str, str]:
             'RMW_IMPLEMENTATION': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')}
 
 
+def mission_config(scenario: Scenario) -> MissionConfig:
+    """The mission of ``scenario`` as the supervisor judges it (``rrtq run`` and ``rrtq robot``)."""
+    ctrl = scenario.controller
+    return MissionConfig(
+        goal=(float(scenario.goal[0]), float(scenario.goal[1])),
+        goal_tolerance=scenario.goal_tolerance, duration=scenario.duration,
+        robot_radius=scenario.robot_radius, bounds=scenario.bounds, dt=ctrl.dt,
+        stop_at_goal=ctrl.variant is not Variant.OPEN_LOOP)
+
+
 def check_supported(scenario: Scenario) -> None:
     """Refuse a controller variant that has no driver yet (exit code 2)."""
     if scenario.controller.variant not in DRIVERS:
@@ -122,13 +132,8 @@ class Run:
         self.out = options.out_dir
         self.graph = build_graph(scenario, options.speed, str(self.out / 'run.mcap'),
                                  live_port=options.live_port)
-        ctrl = scenario.controller
-        self.monitor = MissionMonitor(MissionConfig(
-            goal=(float(scenario.goal[0]), float(scenario.goal[1])),
-            goal_tolerance=scenario.goal_tolerance, duration=scenario.duration,
-            robot_radius=scenario.robot_radius, bounds=scenario.bounds, dt=ctrl.dt,
-            stop_at_goal=ctrl.variant is not Variant.OPEN_LOOP),
-            TrueObstacles.for_scenario(scenario))
+        self.monitor = MissionMonitor(mission_config(scenario),
+                                      TrueObstacles.for_scenario(scenario))
         self.stop_requested: str | None = None
         self.failed_node: dict | None = None
         self.children: dict[str, subprocess.Popen] = {}

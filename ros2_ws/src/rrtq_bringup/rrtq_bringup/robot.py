@@ -32,9 +32,9 @@ import time
 
 
 from rrtq_bringup.graph import NodeSpec, build_graph
-from rrtq_bringup.mission import MissionConfig, MissionMonitor, Outcome
+from rrtq_bringup.mission import MissionMonitor, Outcome
 from rrtq_bringup.node_processes import first_failed, start_node, stop_nodes
-from rrtq_bringup.orchestrator import EXIT_FAILED, EXIT_SUCCESS
+from rrtq_bringup.orchestrator import EXIT_FAILED, EXIT_SUCCESS, mission_config
 from rrtq_bringup.scenario import Scenario
 from rrtq_common import topics
 from rrtq_common.run import READY_PARAMETER
@@ -128,13 +128,9 @@ class RobotRun:
         self.scenario = scenario
         self.options = options
         self.out = options.out_dir
-        ctrl = scenario.controller
-        self.monitor = MissionMonitor(MissionConfig(
-            goal=(float(scenario.goal[0]), float(scenario.goal[1])),
-            goal_tolerance=scenario.goal_tolerance, duration=scenario.duration,
-            robot_radius=scenario.robot_radius, bounds=scenario.bounds, dt=ctrl.dt,
-            stop_at_goal=ctrl.variant is not Variant.OPEN_LOOP), TrueObstacles([]))
-        stale = FreeRunConfig().stale_steps * ctrl.dt
+        # No truth on the robot's side: the mission is judged from /odom alone.
+        self.monitor = MissionMonitor(mission_config(scenario), TrueObstacles([]))
+        stale = FreeRunConfig().stale_steps * scenario.controller.dt
         self.odometry_timeout_s = (options.odometry_timeout_s if options.odometry_timeout_s
                                    else LOST_STALE_MULTIPLE * stale)
         self.clock = MissionClock(self.odometry_timeout_s)
