@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 import pathlib
+import subprocess
+import sys
 import time
 from typing import Any
 
@@ -23,6 +25,25 @@ def save(name: str, results: dict, table: str) -> None:
               f"{info['python']}, commit {info['commit']}_\n\n")
     (RESULTS / f'{name}.md').write_text(header + table + '\n')
     print(header + table)
+
+
+def rrtq_bench(name: str, base: pathlib.Path, out: pathlib.Path, options: list[str],
+               settings: list[str]) -> tuple[dict, str]:
+    """Run ``rrtq bench BASE`` into ``out`` with ``options`` and ``--set`` ``settings``.
+
+    Returns its sweep table (``out/sweep.json``) and the command as a user types it. Exit
+    codes 0 and 1 (a run that failed on its engine) leave a table; any other stops the
+    benchmark.
+    """
+    cmd = [str(ROOT / 'scripts' / 'rrtq'), 'bench', str(base), *options, '--runs', str(out),
+           '--out', str(out), '--overwrite']
+    for s in settings:
+        cmd += ['--set', s]
+    proc = subprocess.run(cmd, text=True, stdout=subprocess.PIPE, stderr=sys.stderr)
+    if proc.returncode not in (0, 1):
+        raise SystemExit(f'{name}: rrtq bench exited {proc.returncode}')
+    command = 'rrtq ' + ' '.join(cmd[1:]).replace(str(ROOT) + '/', '')
+    return json.loads((out / 'sweep.json').read_text()), command
 
 
 def time_steps(ctrl: Any) -> list[float]:

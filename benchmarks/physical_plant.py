@@ -24,13 +24,12 @@ import argparse
 import json
 import os
 import pathlib
-import subprocess
 import sys
 import time
 
 import numpy as np
 
-from common import ROOT, save
+from common import ROOT, rrtq_bench, save
 
 SWEEPS = {
     'mujoco': ('scenarios/mujoco_friction.yaml', ['plant.friction=0,0.1,0.3', 'duration=300']),
@@ -42,20 +41,14 @@ def bench(name: str, seeds: int, args: argparse.Namespace) -> dict:
     """One ``rrtq bench`` sweep; its table and every run's summary."""
     base, settings = SWEEPS[name]
     out = args.runs / name
-    cmd = [str(ROOT / 'scripts' / 'rrtq'), 'bench', str(ROOT / base), '--seeds', str(seeds),
-           '--workers', str(args.workers), '--runs', str(out), '--out', str(out), '--overwrite']
-    for s in settings:
-        cmd += ['--set', s]
     started = time.monotonic()
-    proc = subprocess.run(cmd, text=True, stdout=subprocess.PIPE, stderr=sys.stderr)
-    if proc.returncode not in (0, 1):
-        raise SystemExit(f'{name}: rrtq bench exited {proc.returncode}')
-    table = json.loads((out / 'sweep.json').read_text())
+    table, command = rrtq_bench(name, ROOT / base, out,
+                                ['--seeds', str(seeds), '--workers', str(args.workers)], settings)
     for conf in table['configurations']:
         for run in conf['runs']:
             path = pathlib.Path(run['dir']) / 'summary.json'
             run['summary'] = json.loads(path.read_text()) if path.exists() else {}
-    return {'command': 'rrtq ' + ' '.join(cmd[1:]).replace(str(ROOT) + '/', ''),
+    return {'command': command,
             'configurations': table['configurations'], 'wall_s': time.monotonic() - started}
 
 

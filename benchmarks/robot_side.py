@@ -18,14 +18,12 @@ Usage: ``.venv/bin/python benchmarks/robot_side.py [--seeds 20] [--engine ray|lo
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import pathlib
-import subprocess
 import sys
 import time
 
-from common import ROOT, save
+from common import ROOT, rrtq_bench, save
 
 BASE = ROOT / 'scenarios' / 'defaults_only.yaml'
 NOSPRING = ['plant.stiffness=0']
@@ -66,18 +64,12 @@ DURATION = 'duration=400'
 def run_row(name: str, settings: list[str], args: argparse.Namespace) -> dict:
     """One ``rrtq bench`` of the row; its sweep table's configuration (one)."""
     out = args.runs / name.replace(' ', '_').replace(',', '').replace('+', 'and')
-    cmd = [str(ROOT / 'scripts' / 'rrtq'), 'bench', str(BASE), '--seeds', str(args.seeds),
-           '--engine', args.engine, '--workers', str(args.workers), '--runs', str(out),
-           '--out', str(out), '--overwrite', '--set', DURATION]
-    for s in settings:
-        cmd += ['--set', s]
     started = time.monotonic()
-    proc = subprocess.run(cmd, text=True, stdout=subprocess.PIPE, stderr=sys.stderr)
-    if proc.returncode not in (0, 1):
-        raise SystemExit(f'{name}: rrtq bench exited {proc.returncode}')
-    table = json.loads((out / 'sweep.json').read_text())
+    table, command = rrtq_bench(name, BASE, out, ['--seeds', str(args.seeds), '--engine',
+                                                  args.engine, '--workers', str(args.workers)],
+                                [DURATION, *settings])
     conf = table['configurations'][0]
-    return {'name': name, 'command': 'rrtq ' + ' '.join(cmd[1:]).replace(str(ROOT) + '/', ''),
+    return {'name': name, 'command': command,
             'stats': conf['stats'], 'runs': conf['runs'], 'wall_s': time.monotonic() - started}
 
 
