@@ -27,8 +27,6 @@ from rrtq_controller.staleness import Freshness, OdometryWatch
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 RRTQ = str(ROOT / 'scripts/rrtq')
 DT = 0.05
-SLACK = 0.5
-"""s: a loaded machine's delay between the controller's command and the recorder."""
 
 # Duration 80 s: paced at 5 x real time, a loaded machine slows the robot's side (runs of
 # `make test` beside benchmarks were 0.8 m short of the goal at 40 s).
@@ -265,17 +263,16 @@ def test_killed_plant_stops_the_push_within_3dt_and_fails_the_run(tmp_path):
     assert len(stale) == 1, [m.policy_event for _, _, m in stale]
     t_stale, state = stale[0]
     assert list(state.command) == [0.0, 0.0]
-    # Said when the odometry was just over 3 dt old (its own measure, run time = wall here;
-    # its 10 ms watch may run up to two steps late on a loaded 2-core machine) and received
-    # by the recorder within that plus a slack for the same machine.
+    # Said when the odometry was just over 3 dt old (its own measure, run time = wall here)
+    # and received by the recorder within that plus a slack for a loaded machine.
     age = float(state.policy_reason.split('odometry ')[1].split(' s old')[0])
     pace = float(state.policy_reason.split('at pace ')[1].split(')')[0])
-    assert 3 * DT < age < 3 * DT + 2 * DT, state.policy_reason
-    assert pace == pytest.approx(1.0, abs=0.2), state.policy_reason
-    assert t_stale - last_odom < 3 * DT + SLACK
+    assert 3 * DT < age < 3 * DT + 0.05, state.policy_reason
+    assert pace == pytest.approx(1.0, abs=0.1), state.policy_reason
+    assert t_stale - last_odom < 3 * DT + 0.35
     # From then on only zero: the last commands are zero, and none pushed later than that.
     commands = [(t, m.wrench.force) for t, topic, m in seen if topic == '/cmd_force']
-    late = [(t, f.x, f.y) for t, f in commands if t > last_odom + 3 * DT + SLACK]
+    late = [(t, f.x, f.y) for t, f in commands if t > last_odom + 3 * DT + 0.35]
     assert all(x == 0.0 and y == 0.0 for _, x, y in late), late
     assert commands[-1][1].x == 0.0 and commands[-1][1].y == 0.0
 
