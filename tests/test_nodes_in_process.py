@@ -333,3 +333,31 @@ def test_controller_keeps_off_the_obstacle_the_safety_status_reports(ros, report
     wait_for_messages(executor, states, 2)
     assert cmds.messages[1].wrench.force.x < 0.0                 # pushed back, away from it
     assert states.messages[1].keep_off > 0.0
+
+
+def test_recorder_writes_what_is_queued_when_the_run_ends(ros, tmp_path):
+    # `rrtq robot` ends on a busy machine with the recorder behind: what reached its queue
+    # but was never taken (the last odometry, the controller's last state) is written when
+    # the node is destroyed, after the context is shut down as SIGINT does.
+    context, executor, _ = ros
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    talker = __import__('rclpy').create_node('talker', context=context)
+    executor.add_node(talker)
+    stream = talker.create_publisher(Odometry, '/odom', qos.STREAM)
+    recorder = RecorderNode(context=context, parameter_overrides=params(
+        output=str(tmp_path / 'r.mcap')))
+    executor.add_node(recorder)
+    assert spin_until(executor, lambda: recorder.recorder.has_topic('/odom') and
+                      stream.get_subscription_count() >= 1, 10.0)
+    executor.remove_node(recorder)                     # the recorder falls behind: no spin
+    for k in range(200):
+        stream.publish(conv.odometry_msg(k, np.array([k, 0.0, 0.0, 0.0])))
+    spin_until(executor, lambda: False, 0.5)           # delivery, no take
+    assert recorder.recorder.message_count == 0
+    context.try_shutdown()
+    recorder.destroy_node()
+    reader = make_reader(open(tmp_path / 'r.mcap', 'rb'), decoder_factories=[DecoderFactory()])
+    xs = [m.pose.pose.position.x for _, c, _, m in reader.iter_decoded_messages()
+          if c.topic == '/odom']
+    assert xs == [float(k) for k in range(200)]

@@ -94,7 +94,8 @@ def _parser() -> argparse.ArgumentParser:
                        'else wall time')
     robot.add_argument('--odometry-timeout', type=_positive, metavar='S',
                        help='run time without odometry after which the run fails as '
-                       "'odometry lost' (default 10 x the controller's 3 dt)")
+                       "'odometry lost' (default 10 x the controller's 3 dt; never "
+                       'before 1 s of wall time)')
     plant = sub.add_parser('plant', help="the scenario's plant, disturbance injector and "
                            'obstacle spawner as one process for rrtq robot')
     plant.add_argument('scenario', type=pathlib.Path, help='scenario YAML file')

@@ -112,20 +112,34 @@ class RecorderNode(Node):
             self._write(topic, data, info)
             # Drain what else is queued on this topic now: one executor round trip per
             # message would cap the recorder at a few thousand messages per second.
-            subscription = self._recorded[topic]
-            for _ in range(DRAIN_LIMIT):
-                with subscription.handle:
-                    taken = subscription.handle.take_message(subscription.msg_type, True)
-                if taken is None:
-                    break
-                self._write(topic, *taken)
+            self._drain(topic, DRAIN_LIMIT)
         return with_info(callback)
+
+    def _drain(self, topic: str, limit: int | None) -> int:
+        """Write what is queued on ``topic`` without the executor (at most ``limit``)."""
+        subscription = self._recorded[topic]
+        count = 0
+        while limit is None or count < limit:
+            with subscription.handle:
+                taken = subscription.handle.take_message(subscription.msg_type, True)
+            if taken is None:
+                break
+            self._write(topic, *taken)
+            count += 1
+        return count
 
     def _write(self, topic: str, data: bytes, info) -> None:
         self.recorder.write(topic, data, info['received_timestamp'], info['source_timestamp'],
                             time.monotonic())
 
     def destroy_node(self) -> None:
+        # What arrived but was not yet taken (a recorder behind on a busy machine when the
+        # run ends) is written before the file closes: the last odometry, the last state.
+        for topic in list(self._recorded):
+            try:
+                self._drain(topic, None)
+            except Exception as exc:  # noqa: BLE001 - a closing file beats a lost recording
+                self.get_logger().warning(f'could not drain {topic} at shutdown: {exc}')
         self.recorder.finish()
         super().destroy_node()
 

@@ -137,6 +137,10 @@ class OdometryWatch:
             return float('inf')
         return max(0.0, wall - self._last[1]) * self.pace
 
+    def wall_since_last(self, wall: float) -> float:
+        """Wall time (s) since the newest odometry arrived (inf before any)."""
+        return float('inf') if self._last is None else max(0.0, wall - self._last[1])
+
     def check(self, wall: float) -> Freshness:
         """What to do at wall time ``wall``: control, or command zero (and when to say so)."""
         if self._last is None:
