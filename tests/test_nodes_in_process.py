@@ -220,20 +220,30 @@ def test_worst_case_disturbance_is_the_game_saddle_point(ros):
     assert out.messages[0].model == 'worst_case'
 
 
-def test_recorder_gets_latched_messages_published_before_it_started(ros, tmp_path):
-    context, executor, _ = ros
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
+def recorder_and_odometry(context, executor, tmp_path, before=lambda talker: None):
+    """(an /odom publisher, a recorder to ``tmp_path/r.mcap`` that has subscribed to it)."""
     talker = __import__('rclpy').create_node('talker', context=context)
     executor.add_node(talker)
-    latched = talker.create_publisher(ObstacleArray, '/obstacles/detected', qos.LATCHED)
-    latched.publish(conv.obstacle_array_msg(7, [('a', np.array([[0, 0], [1, 0], [1, 1.0]]))]))
+    talker.kept = before(talker)                     # published before the recorder starts
     stream = talker.create_publisher(Odometry, '/odom', qos.STREAM)
     recorder = RecorderNode(context=context, parameter_overrides=params(
         output=str(tmp_path / 'r.mcap')))
     executor.add_node(recorder)
     assert spin_until(executor, lambda: recorder.recorder.has_topic('/odom') and
                       stream.get_subscription_count() >= 1, 10.0)
+    return stream, recorder
+
+
+def test_recorder_gets_latched_messages_published_before_it_started(ros, tmp_path):
+    context, executor, _ = ros
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    def latch(talker):
+        latched = talker.create_publisher(ObstacleArray, '/obstacles/detected', qos.LATCHED)
+        latched.publish(conv.obstacle_array_msg(7, [('a', np.array([[0, 0], [1, 0], [1, 1.0]]))]))
+        return latched
+    stream, recorder = recorder_and_odometry(context, executor, tmp_path, before=latch)
     for k in range(50):
         stream.publish(conv.odometry_msg(k, np.array([k, 0.0, 0.0, 0.0])))
     assert spin_until(executor, lambda: recorder.recorder.message_count >= 51, 10.0)
@@ -342,14 +352,7 @@ def test_recorder_writes_what_is_queued_when_the_run_ends(ros, tmp_path):
     context, executor, _ = ros
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
-    talker = __import__('rclpy').create_node('talker', context=context)
-    executor.add_node(talker)
-    stream = talker.create_publisher(Odometry, '/odom', qos.STREAM)
-    recorder = RecorderNode(context=context, parameter_overrides=params(
-        output=str(tmp_path / 'r.mcap')))
-    executor.add_node(recorder)
-    assert spin_until(executor, lambda: recorder.recorder.has_topic('/odom') and
-                      stream.get_subscription_count() >= 1, 10.0)
+    stream, recorder = recorder_and_odometry(context, executor, tmp_path)
     executor.remove_node(recorder)                     # the recorder falls behind: no spin
     for k in range(200):
         stream.publish(conv.odometry_msg(k, np.array([k, 0.0, 0.0, 0.0])))
