@@ -46,6 +46,35 @@ def rrtq_bench(name: str, base: pathlib.Path, out: pathlib.Path, options: list[s
     return json.loads((out / 'sweep.json').read_text()), command
 
 
+def bench_row(name: str, base: pathlib.Path, runs: pathlib.Path, options: list[str],
+              settings: list[str]) -> dict:
+    """One table row run as one ``rrtq bench`` of ``base`` in ``runs/<name>``.
+
+    Returns the row's name, its command, the stats and runs of its one configuration and its
+    wall time (s).
+    """
+    out = runs / name.replace(' ', '_').replace(',', '').replace('+', 'and')
+    started = time.monotonic()
+    table, command = rrtq_bench(name, base, out, options, settings)
+    conf = table['configurations'][0]
+    return {'name': name, 'command': command,
+            'stats': conf['stats'], 'runs': conf['runs'], 'wall_s': time.monotonic() - started}
+
+
+def failures_and_commands(rows: list[dict]) -> list[str]:
+    """The markdown lines under a table of rows: the missions that failed, each row's command."""
+    failed = [(r['label'], f['seed'], f['outcome'], f['reason']) for r in rows
+              for f in r['stats']['mission_failures']]
+    lines = []
+    if failed:
+        lines += ['', 'Missions that failed:', '', '| row | seed | outcome | reason |',
+                  '|---|---|---|---|']
+        lines += [f'| {a} | {b} | {c} | {d} |' for a, b, c, d in failed]
+    lines += ['', 'Commands (each row one `rrtq bench`):', '']
+    lines += [f"- {r['label']}: `{r['command']}`" for r in rows]
+    return lines
+
+
 def time_steps(ctrl: Any) -> list[float]:
     """Wrap ``ctrl.step`` so that each call's wall time (s) lands in the returned list."""
     times: list[float] = []

@@ -21,9 +21,8 @@ import argparse
 import os
 import pathlib
 import sys
-import time
 
-from common import ROOT, rrtq_bench, save
+from common import ROOT, bench_row, failures_and_commands, save
 
 BASE = ROOT / 'scenarios' / 'defaults_only.yaml'
 NOSPRING = ['plant.stiffness=0']
@@ -63,14 +62,9 @@ DURATION = 'duration=400'
 
 def run_row(name: str, settings: list[str], args: argparse.Namespace) -> dict:
     """One ``rrtq bench`` of the row; its sweep table's configuration (one)."""
-    out = args.runs / name.replace(' ', '_').replace(',', '').replace('+', 'and')
-    started = time.monotonic()
-    table, command = rrtq_bench(name, BASE, out, ['--seeds', str(args.seeds), '--engine',
-                                                  args.engine, '--workers', str(args.workers)],
-                                [DURATION, *settings])
-    conf = table['configurations'][0]
-    return {'name': name, 'command': command,
-            'stats': conf['stats'], 'runs': conf['runs'], 'wall_s': time.monotonic() - started}
+    return bench_row(name, BASE, args.runs, ['--seeds', str(args.seeds), '--engine', args.engine,
+                                             '--workers', str(args.workers)],
+                     [DURATION, *settings])
 
 
 def render(rows: list[dict]) -> str:
@@ -96,14 +90,7 @@ def render(rows: list[dict]) -> str:
             f"({c.get('ratio_riccati_policy_p90', float('nan')):.3f}) | "
             f"{c.get('within_5pct', 0)} / {c.get('within_10pct', 0)} of {c.get('runs', 0)} | "
             f"{'—' if ttg is None else f'{ttg:.1f}'} |")
-    failed = [(r['label'], f['seed'], f['outcome'], f['reason']) for r in rows
-              for f in r['stats']['mission_failures']]
-    if failed:
-        lines += ['', 'Missions that failed:', '', '| row | seed | outcome | reason |',
-                  '|---|---|---|---|']
-        lines += [f'| {a} | {b} | {c} | {d} |' for a, b, c, d in failed]
-    lines += ['', 'Commands (each row one `rrtq bench`):', '']
-    lines += [f"- {r['label']}: `{r['command']}`" for r in rows]
+    lines += failures_and_commands(rows)
     return '\n'.join(lines)
 
 
