@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import argparse
 import json
+import os
 import pathlib
 import subprocess
 import sys
 import time
-from typing import Any
+from typing import Any, Callable
 
 from rrtq_bringup.bench_table import machine
 
@@ -88,3 +90,37 @@ def time_steps(ctrl: Any) -> list[float]:
 
     ctrl.step = timed
     return times
+
+
+def rows_benchmark(name: str, description: str, rows: dict[str, tuple[str, list[str]]],
+                   render: Callable[[list[dict]], str], base: pathlib.Path, *,
+                   engine: str = 'local', settings: tuple[str, ...] = ()) -> int:
+    """The command line of a benchmark whose rows are each one ``rrtq bench`` of ``base``.
+
+    ``rows`` maps a row's name to its label and its ``--set`` settings (after ``settings``,
+    common to every row); the rendered table goes to ``results/<name>.{md,json}``, or to
+    stdout with ``--no-save``.
+    """
+    ap = argparse.ArgumentParser(description=description.splitlines()[0])
+    ap.add_argument('--seeds', type=int, default=20)
+    ap.add_argument('--engine', choices=('local', 'ray'), default=engine)
+    ap.add_argument('--workers', type=int, default=os.cpu_count() or 1)
+    ap.add_argument('--rows', nargs='+', choices=sorted(rows), default=list(rows))
+    ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / name)
+    ap.add_argument('--no-save', action='store_true')
+    args = ap.parse_args()
+    done = []
+    for row_name in args.rows:
+        label, row_settings = rows[row_name]
+        print(f'{name}: {row_name} ({label})', file=sys.stderr, flush=True)
+        row = bench_row(row_name, base, args.runs, ['--seeds', str(args.seeds), '--engine',
+                                                    args.engine, '--workers', str(args.workers)],
+                        [*settings, *row_settings])
+        row['label'] = label
+        done.append(row)
+    table = render(done)
+    if args.no_save:
+        print(table)
+    else:
+        save(name, {'seeds': args.seeds, 'rows': done}, table)
+    return 0

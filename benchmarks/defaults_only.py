@@ -16,12 +16,9 @@ Usage: ``.venv/bin/python benchmarks/defaults_only.py [--seeds 20] [--engine loc
 
 from __future__ import annotations
 
-import argparse
-import os
-import pathlib
 import sys
 
-from common import ROOT, bench_row, failures_and_commands, save
+from common import ROOT, failures_and_commands, rows_benchmark
 
 BASE = ROOT / 'scenarios' / 'defaults_only.yaml'
 ROWS: dict[str, tuple[str, list[str]]] = {
@@ -91,29 +88,7 @@ def render(rows: list[dict]) -> str:
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--seeds', type=int, default=20)
-    ap.add_argument('--engine', choices=('local', 'ray'), default='local')
-    ap.add_argument('--workers', type=int, default=os.cpu_count() or 1)
-    ap.add_argument('--rows', nargs='+', choices=sorted(ROWS), default=list(ROWS))
-    ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / 'defaults_only')
-    ap.add_argument('--no-save', action='store_true')
-    args = ap.parse_args()
-    rows = []
-    for name in args.rows:
-        label, settings = ROWS[name]
-        print(f'defaults_only: {name} ({label})', file=sys.stderr, flush=True)
-        row = bench_row(name, BASE, args.runs, ['--seeds', str(args.seeds), '--engine',
-                                                args.engine, '--workers', str(args.workers)],
-                        settings)
-        row['label'] = label
-        rows.append(row)
-    table = render(rows)
-    if args.no_save:
-        print(table)
-    else:
-        save('defaults_only', {'seeds': args.seeds, 'rows': rows}, table)
-    return 0
+    return rows_benchmark('defaults_only', __doc__, ROWS, render, BASE)
 
 
 if __name__ == '__main__':
