@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import argparse
 import json
+import os
 import pathlib
 import subprocess
 import sys
 import time
-from typing import Any
+from typing import Any, Callable
 
 from rrtq_bringup.bench_table import machine
 
@@ -46,6 +48,35 @@ def rrtq_bench(name: str, base: pathlib.Path, out: pathlib.Path, options: list[s
     return json.loads((out / 'sweep.json').read_text()), command
 
 
+def bench_row(name: str, base: pathlib.Path, runs: pathlib.Path, options: list[str],
+              settings: list[str]) -> dict:
+    """One table row run as one ``rrtq bench`` of ``base`` in ``runs/<name>``.
+
+    Returns the row's name, its command, the stats and runs of its one configuration and its
+    wall time (s).
+    """
+    out = runs / name.replace(' ', '_').replace(',', '').replace('+', 'and')
+    started = time.monotonic()
+    table, command = rrtq_bench(name, base, out, options, settings)
+    conf = table['configurations'][0]
+    return {'name': name, 'command': command,
+            'stats': conf['stats'], 'runs': conf['runs'], 'wall_s': time.monotonic() - started}
+
+
+def failures_and_commands(rows: list[dict]) -> list[str]:
+    """The markdown lines under a table of rows: the missions that failed, each row's command."""
+    failed = [(r['label'], f['seed'], f['outcome'], f['reason']) for r in rows
+              for f in r['stats']['mission_failures']]
+    lines = []
+    if failed:
+        lines += ['', 'Missions that failed:', '', '| row | seed | outcome | reason |',
+                  '|---|---|---|---|']
+        lines += [f'| {a} | {b} | {c} | {d} |' for a, b, c, d in failed]
+    lines += ['', 'Commands (each row one `rrtq bench`):', '']
+    lines += [f"- {r['label']}: `{r['command']}`" for r in rows]
+    return lines
+
+
 def time_steps(ctrl: Any) -> list[float]:
     """Wrap ``ctrl.step`` so that each call's wall time (s) lands in the returned list."""
     times: list[float] = []
@@ -59,3 +90,37 @@ def time_steps(ctrl: Any) -> list[float]:
 
     ctrl.step = timed
     return times
+
+
+def rows_benchmark(name: str, description: str, rows: dict[str, tuple[str, list[str]]],
+                   render: Callable[[list[dict]], str], base: pathlib.Path, *,
+                   engine: str = 'local', settings: tuple[str, ...] = ()) -> int:
+    """The command line of a benchmark whose rows are each one ``rrtq bench`` of ``base``.
+
+    ``rows`` maps a row's name to its label and its ``--set`` settings (after ``settings``,
+    common to every row); the rendered table goes to ``results/<name>.{md,json}``, or to
+    stdout with ``--no-save``.
+    """
+    ap = argparse.ArgumentParser(description=description.splitlines()[0])
+    ap.add_argument('--seeds', type=int, default=20)
+    ap.add_argument('--engine', choices=('local', 'ray'), default=engine)
+    ap.add_argument('--workers', type=int, default=os.cpu_count() or 1)
+    ap.add_argument('--rows', nargs='+', choices=sorted(rows), default=list(rows))
+    ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / name)
+    ap.add_argument('--no-save', action='store_true')
+    args = ap.parse_args()
+    done = []
+    for row_name in args.rows:
+        label, row_settings = rows[row_name]
+        print(f'{name}: {row_name} ({label})', file=sys.stderr, flush=True)
+        row = bench_row(row_name, base, args.runs, ['--seeds', str(args.seeds), '--engine',
+                                                    args.engine, '--workers', str(args.workers)],
+                        [*settings, *row_settings])
+        row['label'] = label
+        done.append(row)
+    table = render(done)
+    if args.no_save:
+        print(table)
+    else:
+        save(name, {'seeds': args.seeds, 'rows': done}, table)
+    return 0

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """How well the critic identifies the greedy gain of a fixed policy, plant by plant.
 
-Why the heavy rovers' learning stalls (``defaults_only_watch_progress.md``): on the
+Why the heavy rovers' learning stalls (``docs/notes/2026-12-02-safe-learning-from-defaults.md``): on the
 120 kg, 8 kg/s rover the gain error plateaus near 0.6 while the critic's fit residual is
 about 1 %. This bench separates identification from the guard and the actor. The actor
 holds one policy, the finite-horizon Riccati gain projected on the actor's time basis (the

@@ -17,13 +17,9 @@ Usage: ``.venv/bin/python benchmarks/robot_side.py [--seeds 20] [--engine ray|lo
 
 from __future__ import annotations
 
-import argparse
-import os
-import pathlib
 import sys
-import time
 
-from common import ROOT, rrtq_bench, save
+from common import ROOT, failures_and_commands, rows_benchmark
 
 BASE = ROOT / 'scenarios' / 'defaults_only.yaml'
 NOSPRING = ['plant.stiffness=0']
@@ -61,18 +57,6 @@ ROWS: dict[str, tuple[str, list[str]]] = {
 DURATION = 'duration=400'
 
 
-def run_row(name: str, settings: list[str], args: argparse.Namespace) -> dict:
-    """One ``rrtq bench`` of the row; its sweep table's configuration (one)."""
-    out = args.runs / name.replace(' ', '_').replace(',', '').replace('+', 'and')
-    started = time.monotonic()
-    table, command = rrtq_bench(name, BASE, out, ['--seeds', str(args.seeds), '--engine',
-                                                  args.engine, '--workers', str(args.workers)],
-                                [DURATION, *settings])
-    conf = table['configurations'][0]
-    return {'name': name, 'command': command,
-            'stats': conf['stats'], 'runs': conf['runs'], 'wall_s': time.monotonic() - started}
-
-
 def render(rows: list[dict]) -> str:
     """The table of the rows, and the missions that failed."""
     lines = ['Every row from the controller\'s defaults, blind to the disturbance '
@@ -96,39 +80,13 @@ def render(rows: list[dict]) -> str:
             f"({c.get('ratio_riccati_policy_p90', float('nan')):.3f}) | "
             f"{c.get('within_5pct', 0)} / {c.get('within_10pct', 0)} of {c.get('runs', 0)} | "
             f"{'—' if ttg is None else f'{ttg:.1f}'} |")
-    failed = [(r['label'], f['seed'], f['outcome'], f['reason']) for r in rows
-              for f in r['stats']['mission_failures']]
-    if failed:
-        lines += ['', 'Missions that failed:', '', '| row | seed | outcome | reason |',
-                  '|---|---|---|---|']
-        lines += [f'| {a} | {b} | {c} | {d} |' for a, b, c, d in failed]
-    lines += ['', 'Commands (each row one `rrtq bench`):', '']
-    lines += [f"- {r['label']}: `{r['command']}`" for r in rows]
+    lines += failures_and_commands(rows)
     return '\n'.join(lines)
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--seeds', type=int, default=20)
-    ap.add_argument('--engine', choices=('local', 'ray'), default='ray')
-    ap.add_argument('--workers', type=int, default=os.cpu_count() or 1)
-    ap.add_argument('--rows', nargs='+', choices=sorted(ROWS), default=list(ROWS))
-    ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / 'robot_side')
-    ap.add_argument('--no-save', action='store_true')
-    args = ap.parse_args()
-    rows = []
-    for name in args.rows:
-        label, settings = ROWS[name]
-        print(f'robot_side: {name} ({label})', file=sys.stderr, flush=True)
-        row = run_row(name, settings, args)
-        row['label'] = label
-        rows.append(row)
-    table = render(rows)
-    if args.no_save:
-        print(table)
-    else:
-        save('robot_side', {'seeds': args.seeds, 'rows': rows}, table)
-    return 0
+    return rows_benchmark('robot_side', __doc__, ROWS, render, BASE, engine='ray',
+                          settings=(DURATION,))
 
 
 if __name__ == '__main__':

@@ -3,8 +3,9 @@
 For each seed's recording: the outcome (its summary.json), the median over the last ten
 legs of each leg's cost against the Riccati optimum from its start
 (:mod:`rrtq_bringup.leg_table`), the largest commanded force per axis on ``/cmd_force``,
-and the guard's reverts and holds (``/controller/state.policy_event``). The rows are the
-markdown table of ``benchmarks/results/defaults_only_bench.md``.
+and the guard's reverts and holds (``/controller/state.policy_event``). Its rows made the
+per-seed tables of the defaults-only rounds
+(``docs/notes/2026-12-02-safe-learning-from-defaults.md``).
 
     python tools/bench_controller_table.py RUNS_DIR [RUNS_DIR ...] [--label LABEL ...]
 
