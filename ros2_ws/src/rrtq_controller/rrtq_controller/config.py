@@ -239,8 +239,8 @@ class ControllerConfig:
     robustness bench, 11 had a leg more than half its length off its line; with the probing
     turned toward the line beyond 0.1 of the length, 4 (one of them under the true Riccati
     policy too; 0.2: 5), at a price: 19 plants within 5 % instead of 21 (all disturbed), and
-    in the closed loop one 110 kg and one 120 kg run above 1.05 (benchmarks/results/
-    probing_line.md)."""
+    in the closed loop one 110 kg and one 120 kg run above 1.05
+    (docs/notes/2026-12-02-safe-learning-from-defaults.md)."""
     max_fit_residual: float = setting(0.3, **_POSITIVE, doc='guard: largest relative residual '
                                       'of the critic fit for which its proposal is adopted')
     """√(Σ w e²) / √(Σ w y²) over the Bellman rows (see :func:`critic.fit`); beyond the papers,
