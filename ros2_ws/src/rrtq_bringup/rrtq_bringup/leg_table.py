@@ -70,7 +70,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from rrtq_bringup.leg_model import LegModel, gain_from_actor, time_basis_of
+from rrtq_bringup.leg_model import LegModel, time_basis_of
+from rrtq_common.actor import actor_gain
 from rrtq_bringup.scenario import Scenario
 from rrtq_controller.basis import TimeBasis
 from rrtq_sim.plant import SpringAnchor
@@ -316,9 +317,10 @@ def _gain_error(mdl: LegModel, actor_w: list[Array], taus: Array, basis: TimeBas
     """Mean ‖K̂(τ_k) − K(τ_k)‖_F / ‖K(τ_k)‖_F over the steps (nan without usable weights)."""
     errs = []
     for w, tau in zip(actor_w, taus):
-        K_hat = gain_from_actor(w, float(tau), mdl.n, mdl.m, basis)
-        if K_hat is None:
+        gain = actor_gain(w, basis.rates, basis.powers, basis.horizon, mdl.n, mdl.m)
+        if gain is None:
             return math.nan
+        K_hat = gain(float(tau))
         K = mdl.gain(float(tau))
         errs.append(float(np.linalg.norm(K_hat - K) / np.linalg.norm(K)))
     return float(np.mean(errs)) if errs else math.nan
