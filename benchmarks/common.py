@@ -11,7 +11,7 @@ import sys
 import time
 from typing import Any, Callable
 
-from rrtq_bringup.bench_table import machine
+from rrtq_bringup.bench.table import machine
 
 RESULTS = pathlib.Path(__file__).resolve().parent / 'results'
 ROOT = RESULTS.parents[1]

@@ -7,7 +7,7 @@ plant and disturbance set by ``--set``; the robot side reads no simulator truth.
 goals with their 95 % interval (Wilson), collisions, runs out of bounds, the largest command
 over the actuator's limit, and the last ten legs' cost against the true Riccati policy flown
 through the same recorded disturbance, odometry noise and actuation delay
-(``rrtq_bringup.bench_control``; the referee reads ``/odom/truth``). Targets (issue 31):
+(``rrtq_bringup.bench.control``; the referee reads ``/odom/truth``). Targets (issue 31):
 >= 19/20 goals per row, no collision, none out of bounds, no command beyond the limit, the
 last-ten median <= 1.10 (<= 1.05 without a disturbance).
 

@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from rrtq_bringup.bench_table import machine
+from rrtq_bringup.bench.table import machine
 from rrtq_common.otte import read_polygons
 from rrtq_planner.rrtx import RRTX, RRTXConfig
 from rrtq_testing.paths import OTTE

@@ -7,7 +7,7 @@ scenarios/vf_lpc_bench.yaml --seeds 3 --workers 1 --set controller.variant=nomin
 and writes ``results/vf_lpc_bench.md`` / ``.json``: per configuration, over the same seeds
 and random layouts, success and collisions, time to goal, path length, control effort
 (Σ‖u‖²Δt), the largest lateral acceleration v²κ and jerk of the driven path (from
-``/odom``, :func:`rrtq_bringup.report_vf_lpc.lateral_acceleration`) and of the published
+``/odom``, :func:`rrtq_bringup.report.vf_lpc.lateral_acceleration`) and of the published
 references (every sample of every ``/guidance/reference``, vf_lpc only), the smallest
 clearance to the true obstacles, and the controller's wall time per step (the run's
 ``step_ms``; the machine is shared). Usage::
@@ -28,7 +28,7 @@ from common import ROOT, save
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from rrtq_bringup.report_vf_lpc import lateral_acceleration
+from rrtq_bringup.report.vf_lpc import lateral_acceleration
 from rrtq_bringup.run_data import read_run
 
 SCENARIO = ROOT / 'scenarios' / 'vf_lpc_bench.yaml'

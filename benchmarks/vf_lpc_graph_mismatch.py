@@ -31,8 +31,8 @@ import yaml
 from common import RESULTS, ROOT, save
 from vf_lpc_bench import reference_lateral
 
-from rrtq_bringup.report import report
-from rrtq_bringup.report_vf_lpc import plot_prediction_error, vf_lpc_series
+from rrtq_bringup.report.run import report
+from rrtq_bringup.report.vf_lpc import plot_prediction_error, vf_lpc_series
 from rrtq_bringup.run_data import read_run
 
 matplotlib.use('Agg')

@@ -12,9 +12,9 @@ import yaml
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from rrtq_bringup.bench_control import control_metrics
-from rrtq_bringup.bench_layouts import LayoutConfig, generate_layout
-from rrtq_bringup.bench_table import aggregate, wilson
+from rrtq_bringup.bench.control import control_metrics
+from rrtq_bringup.bench.layouts import LayoutConfig, generate_layout
+from rrtq_bringup.bench.table import aggregate, wilson
 from rrtq_bringup.scenario import load_scenario
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

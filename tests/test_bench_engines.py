@@ -14,7 +14,7 @@ import pytest
 import yaml
 from mcap.reader import make_reader
 
-from rrtq_bringup.bench_sweep import SweepError, apply, configurations, label, parse_setting
+from rrtq_bringup.bench.sweep import SweepError, apply, configurations, label, parse_setting
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 RRTQ = str(ROOT / 'scripts/rrtq')

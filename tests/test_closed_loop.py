@@ -7,7 +7,7 @@ import subprocess
 import pytest
 from mcap.reader import make_reader
 
-from rrtq_bringup.report import summarise
+from rrtq_bringup.report.run import summarise
 from rrtq_bringup.run_data import read_run
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

@@ -24,7 +24,7 @@ import yaml
 
 from rrtq_bringup import forest as make_forest
 from rrtq_bringup.leg_costs import evaluate
-from rrtq_bringup.report import report
+from rrtq_bringup.report.run import report
 from rrtq_bringup.run_data import read_run
 from rrtq_bringup.scenario import load_scenario
 from rrtq_common.geometry import point_in_polygon, point_polygon_distance

@@ -18,7 +18,7 @@ import shapely
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from rrtq_bringup.report import summarise
+from rrtq_bringup.report.run import summarise
 from rrtq_bringup.run_data import embedded_scenario, read_run
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

@@ -179,7 +179,7 @@ def test_paced_mode_follows_the_wall_clock(tmp_path):
 
 
 def test_report_from_the_recording_agrees_with_the_live_summary(runs, tmp_path):
-    from rrtq_bringup.report import report
+    from rrtq_bringup.report.run import report
     _, out = runs[(3, 'processes')]
     live = json.loads((out / 'summary.json').read_text())
     offline = report(out / 'run.mcap', tmp_path / 'report')

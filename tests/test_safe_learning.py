@@ -23,7 +23,7 @@ import numpy as np
 
 from rrtq_bringup.leg_costs import evaluate
 from rrtq_bringup.leg_table import summary
-from rrtq_bringup.report import summarise
+from rrtq_bringup.report.run import summarise
 from rrtq_bringup.run_data import embedded_scenario, read_run
 from rrtq_bringup.scenario import load_scenario
 

@@ -4,7 +4,7 @@ A rover crosses a smooth field bump (``disturbance: {model: field}``, the ground
 its way to the goal under ``safety.margin: learned_bound``. The recorded estimates are
 decoded and checked for their grid and against the node's own status; then the last one is
 compared with the scenario's true field, computed here from the scenario and the plant
-(``rrtq_bringup.report_margins.true_field``: the residual the field leaves over one step of
+(``rrtq_bringup.report.margins.true_field``: the residual the field leaves over one step of
 the recorded plant, over dt), not from anything the node published: inside the region the
 data support, the bump is learned (the true value within mean ± band where the bump is
 strongest, and the band narrower than the value: the estimate tells the bump from nothing).
@@ -22,7 +22,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from rrtq_bringup.report_margins import grid, read_estimates, true_field
+from rrtq_bringup.report.margins import grid, read_estimates, true_field
 from rrtq_bringup.run_data import recorded_scenario
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

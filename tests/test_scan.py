@@ -311,7 +311,7 @@ def test_a_scan_run_reaches_its_goal_and_records_scans_and_map(tmp_path, root):
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import LaserScan
 
-    from rrtq_bringup.report import summarise
+    from rrtq_bringup.report.run import summarise
     from rrtq_bringup.run_data import embedded_scenario, read_run
     path = tmp_path / 'loop_scan.yaml'
     path.write_text(LOOP)

@@ -16,8 +16,8 @@ import subprocess
 import numpy as np
 from mcap.reader import make_reader
 
-from rrtq_bringup.report import summarise
-from rrtq_bringup.report_vf_lpc import vf_lpc_summary
+from rrtq_bringup.report.run import summarise
+from rrtq_bringup.report.vf_lpc import vf_lpc_summary
 from rrtq_bringup.run_data import embedded_scenario, read_run
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]

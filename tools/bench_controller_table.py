@@ -21,7 +21,7 @@ import json
 import pathlib
 import sys
 
-from rrtq_bringup.bench_control import control_metrics
+from rrtq_bringup.bench.control import control_metrics
 
 
 def seed_row(seed_dir: pathlib.Path) -> dict:

@@ -214,7 +214,7 @@ def cmd_report(args: argparse.Namespace) -> int:
         print(f'rrtq: error: {args.recording}: no such recording', file=sys.stderr)
         return EXIT_BAD_INPUT
     from mcap.exceptions import McapError
-    from rrtq_bringup.report import report
+    from rrtq_bringup.report.run import report
     try:
         summary = report(args.recording, args.out,
                          video_interval=args.frame_interval if args.video else None,
@@ -238,7 +238,7 @@ def main(argv: list[str] | None = None) -> int:
         from rrtq_bringup.plan_cli import main as plan_main
         return plan_main(argv[1:])
     if argv[:1] == ['bench']:
-        from rrtq_bringup.bench import main as bench_main
+        from rrtq_bringup.bench.monte_carlo import main as bench_main
         return bench_main(argv[1:])
     if argv[:1] == ['identify']:
         from rrtq_bringup.identify import main as identify_main

@@ -3,7 +3,7 @@
 The model behind :mod:`rrtq_bringup.leg_table` (see its module doc for the method): for
 one affine offset c of the leg (0 unless the spring pulls towards the world origin), the
 Van Loan matrices of one held step and the finite-horizon Riccati solution of the true
-plant with the controller's weights; and the learned gain K̂(τ) from recorded actor weights.
+plant with the controller's weights; and the time basis the actor weights were recorded on.
 """
 
 from __future__ import annotations
@@ -15,12 +15,11 @@ from numpy.typing import NDArray
 from scipy.linalg import expm
 
 from rrtq_bringup.scenario import Scenario
-from rrtq_common.actor import actor_gain
 from rrtq_controller.basis import TimeBasis
 from rrtq_controller.config import ControllerConfig
 from rrtq_sim.riccati import solve_riccati
 
-__all__ = ['LegModel', 'time_basis_of', 'gain_from_actor']
+__all__ = ['LegModel', 'time_basis_of']
 
 Array = NDArray[np.float64]
 
@@ -104,17 +103,3 @@ class LegModel:
         P = self.riccati.P(tau)[:self.n, :self.n]
         return np.linalg.solve(self.R, self.B.T @ P)
 
-
-def gain_from_actor(weights: Array, tau: float, n: int, m: int, basis: TimeBasis) -> Array | None:
-    """K̂(τ) (m x n) from flattened actor weights Ŵa ((L n) x m), or None if they do not fit.
-
-    ``basis`` is the last recorded one; weights of the exponentials alone (before the
-    controller widened its basis, :meth:`QLearningController.widen_time_basis`) are read
-    on those (:func:`rrtq_common.actor.actor_gain` reads them).
-    """
-    w = np.asarray(weights, dtype=float)
-    powers = basis.powers
-    if w.size != basis.size * n * m and w.size == len(basis.rates) * n * m:
-        powers = ()  # recorded before the controller widened its basis
-    gain = actor_gain(w, basis.rates, powers, basis.horizon, n, m)
-    return None if gain is None else gain(tau)

@@ -2,7 +2,8 @@
 
 The monitor judges the true state (/odom/truth) against the true obstacles and the bounds
 of the scenario (:class:`rrtq_sim.referee.Referee`), not against what any node believes:
-the collision check here is the referee's, not the safety node's.
+the collision check here is the referee's, not the safety node's. ``rrtq robot``, which has
+no truth, judges /odom on the mission's time (:class:`MissionClock`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 
 from rrtq_common.settings import setting
 from rrtq_common.world import TrueObstacles
+from rrtq_controller.staleness import OdometryWatch
 from rrtq_sim.referee import Bounds, Referee
 
 
@@ -198,3 +200,27 @@ class MissionMonitor:
             'replan_ms': _percentiles(self.replan_ms, (50, 95, 100)),
             'controller_step_ms': _percentiles(self.controller_step_ms, (50, 95)),
         }
+
+
+class MissionClock:
+    """The mission's time of the odometry, and the odometry's age (no rclpy).
+
+    On sim time the mission's time is the stamp; on wall time, the wall time since the first
+    odometry (its stamps are the plant's wall clock).
+    """
+
+    def __init__(self, odometry_timeout_s: float) -> None:
+        self.watch = OdometryWatch(odometry_timeout_s, 1.0)
+        self.sim_time = False
+        self.t0: float | None = None
+
+    def odometry(self, stamp: float, wall: float) -> float:
+        """Note odometry stamped ``stamp`` (s) at wall time ``wall`` (s); its mission time."""
+        self.watch.arrived(stamp, wall)
+        if self.t0 is None:
+            self.t0 = 0.0 if self.sim_time else stamp
+        return self.time_of(stamp)
+
+    def time_of(self, stamp: float) -> float:
+        """The mission's time of a stamp (s)."""
+        return stamp - (self.t0 or 0.0)

@@ -31,7 +31,7 @@ from rrtq_bringup.run_calibration import write_run_calibration
 from rrtq_bringup.scenario import Scenario
 from rrtq_common.world import TrueObstacles
 from rrtq_controller.config import Variant
-from rrtq_controller.driver import DRIVERS
+from rrtq_controller.drivers import DRIVERS
 
 EXIT_SUCCESS, EXIT_FAILED, EXIT_BAD_INPUT = 0, 1, 2
 DOMAIN_LOCK_DIR = pathlib.Path('/tmp/rrtq-domains')

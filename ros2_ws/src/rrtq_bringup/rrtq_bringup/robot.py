@@ -32,7 +32,7 @@ import time
 
 
 from rrtq_bringup.graph import NodeSpec, build_graph
-from rrtq_bringup.mission import MissionMonitor, Outcome
+from rrtq_bringup.mission import MissionClock, MissionMonitor, Outcome
 from rrtq_bringup.node_processes import first_failed, start_node, stop_nodes
 from rrtq_bringup.orchestrator import EXIT_FAILED, EXIT_SUCCESS, mission_config
 from rrtq_bringup.scenario import Scenario
@@ -40,7 +40,7 @@ from rrtq_common import topics
 from rrtq_common.run import READY_PARAMETER
 from rrtq_common.world import TrueObstacles
 from rrtq_controller.config import Variant
-from rrtq_controller.staleness import FreeRunConfig, OdometryWatch
+from rrtq_controller.staleness import FreeRunConfig
 
 ROBOT_NODES = ('controller', 'planner', 'safety', 'obstacle_mapper', 'recorder', 'live')
 """The nodes of ``rrtq run``'s graph that ``rrtq robot`` starts (live with ``--live``; the
@@ -102,30 +102,6 @@ def robot_env() -> dict[str, str]:
     env.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     env.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
     return env
-
-
-class MissionClock:
-    """The mission's time of the odometry, and the odometry's age (no rclpy).
-
-    On sim time the mission's time is the stamp; on wall time, the wall time since the first
-    odometry (its stamps are the plant's wall clock).
-    """
-
-    def __init__(self, odometry_timeout_s: float) -> None:
-        self.watch = OdometryWatch(odometry_timeout_s, 1.0)
-        self.sim_time = False
-        self.t0: float | None = None
-
-    def odometry(self, stamp: float, wall: float) -> float:
-        """Note odometry stamped ``stamp`` (s) at wall time ``wall`` (s); its mission time."""
-        self.watch.arrived(stamp, wall)
-        if self.t0 is None:
-            self.t0 = 0.0 if self.sim_time else stamp
-        return self.time_of(stamp)
-
-    def time_of(self, stamp: float) -> float:
-        """The mission's time of a stamp (s)."""
-        return stamp - (self.t0 or 0.0)
 
 
 class RobotRun:

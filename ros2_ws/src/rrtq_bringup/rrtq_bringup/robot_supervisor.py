@@ -8,8 +8,7 @@ import numpy as np
 from geometry_msgs.msg import WrenchStamped
 from rrtq_msgs.msg import PlannerStats
 
-from rrtq_bringup.mission import MissionMonitor
-from rrtq_bringup.robot import MissionClock
+from rrtq_bringup.mission import MissionClock, MissionMonitor
 from rrtq_bringup.supervisor import SupervisorNode
 from rrtq_common import conversions as conv
 from rrtq_common import topics

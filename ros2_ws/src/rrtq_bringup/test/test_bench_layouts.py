@@ -11,7 +11,7 @@ import shapely
 import yaml
 from shapely.geometry import LineString, Polygon
 
-from rrtq_bringup.bench_layouts import (LayoutConfig, LayoutError, generate_layout,
+from rrtq_bringup.bench.layouts import (LayoutConfig, LayoutError, generate_layout,
                                         layout_scenario)
 from rrtq_bringup.scenario import load_scenario, parse_scenario
 from rrtq_common.optimum import shortest_path

@@ -13,7 +13,8 @@ from typing import Callable
 import numpy as np
 import pytest
 
-from rrtq_bringup.leg_model import gain_from_actor, time_basis_of
+from rrtq_bringup.leg_model import time_basis_of
+from rrtq_common.actor import actor_gain
 from rrtq_bringup.leg_table import leg_table, summary
 from rrtq_bringup.run_data import RunData
 from rrtq_sim.plant import Plant
@@ -210,7 +211,7 @@ def test_leg_split_by_time_and_truncated_leg_keeps_cost_to_go():
     assert abs(table.rows[0].ratio - 1.0) < 1e-3
 
 
-def test_gain_from_actor_matches_the_controller_readout():
+def test_actor_gain_on_the_recorded_basis_matches_the_controller_readout():
     from rrtq_controller.config import ControllerConfig
     from rrtq_controller.q_learning import QLearningController
 
@@ -218,9 +219,15 @@ def test_gain_from_actor_matches_the_controller_readout():
     W = np.random.default_rng(1).normal(size=ctrl.actor_weights.size)
     ctrl.set_weights(actor=W)
     basis = time_basis_of(object(), ctrl.config.horizon)  # nothing recorded: the defaults
+    gain = actor_gain(ctrl.actor_weights, basis.rates, basis.powers, basis.horizon, 4, 2)
     for tau in (0.0, 1.3, 10.0):
-        assert np.allclose(gain_from_actor(ctrl.actor_weights, tau, 4, 2, basis), ctrl.gain(tau))
-    assert gain_from_actor(np.zeros(3), 1.0, 4, 2, basis) is None
+        assert np.allclose(gain(tau), ctrl.gain(tau))
+    assert actor_gain(np.zeros(3), basis.rates, basis.powers, basis.horizon, 4, 2) is None
+    # weights recorded before the controller widened its basis, read on the widened one
+    assert not basis.powers
+    widened = actor_gain(ctrl.actor_weights, basis.rates, (1, 2), basis.horizon, 4, 2)
+    for tau in (0.0, 1.3, 10.0):
+        assert np.allclose(widened(tau), ctrl.gain(tau))
 
 
 def test_gain_error_is_zero_for_weights_that_fit_the_riccati_gain():

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rrtq_bringup.report import summarise, true_clearance
+from rrtq_bringup.report.run import summarise, true_clearance
 from rrtq_bringup.run_data import RunData
 
 SQUARE = np.array([[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]])

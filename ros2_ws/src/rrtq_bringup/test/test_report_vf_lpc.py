@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from rrtq_bringup.report_vf_lpc import lateral_acceleration
+from rrtq_bringup.report.vf_lpc import lateral_acceleration
 
 
 def circle(speed, radius, dt=0.05, steps=200):

@@ -39,7 +39,8 @@ from rrtq_common.params import declare_config, spin_node
 from rrtq_common.run import Dimensions, RunConfig
 from rrtq_controller.config import ControllerConfig, Variant
 from rrtq_controller.conversions import changed_reference, command_msg, controller_state_msg
-from rrtq_controller.driver import Watch, make_driver
+from rrtq_controller.driver import Watch
+from rrtq_controller.drivers import make_driver
 from rrtq_controller.vf_lpc import LPCConfig
 
 

@@ -4,8 +4,9 @@ A :class:`Driver` is one controller variant behind the node: it adopts a plan wh
 stamp changes, refuses non-finite odometry (zero force, nothing learned from it), and
 keeps the paced-mode watchdog that stops pushing when the odometry goes stale.
 ``LearningDriver`` walks the planner's waypoints leg by leg (RRT-QX Algorithm 1) with
-the Q-learning controller; ``OpenLoopDriver`` plays a scripted force profile.
-:func:`make_driver` picks the driver of a :class:`Variant` (:data:`DRIVERS`).
+the Q-learning controller; ``OpenLoopDriver`` plays a scripted force profile; the vf_lpc
+variant's is :class:`rrtq_controller.vf_lpc.driver.VFLPCDriver`.
+:func:`rrtq_controller.drivers.make_driver` picks the driver of a :class:`Variant`.
 """
 
 from __future__ import annotations
@@ -13,15 +14,13 @@ from __future__ import annotations
 import abc
 import dataclasses
 import enum
-from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from rrtq_common.lockstep import OnChange
 
-from .config import ControllerConfig, Variant
+from .config import ControllerConfig
 from .legs import LegEvent, LegSequencer
 from .open_loop import ForceProfile
 from .q_learning import QLearningController
@@ -284,24 +283,3 @@ class OpenLoopDriver(Driver):
             disturbance_weights=empty, critic_error=0.0, terminal_error=0.0,
             event=LegEvent.CONTINUE.value)
 
-
-def _vf_lpc_driver(config: ControllerConfig, n: int, m: int, q: int,
-                   rng: np.random.Generator, **extra: Any) -> Driver:
-    # Imported when needed: the vf_lpc driver is a Driver, so it imports this module.
-    from .vf_lpc.driver import VFLPCDriver
-    return VFLPCDriver(config, n, m, q, rng, **extra)
-
-
-DRIVERS: dict[Variant, Callable[..., Driver]] = {
-    Variant.NOMINAL: LearningDriver,
-    Variant.ROBUST: LearningDriver,
-    Variant.OPEN_LOOP: OpenLoopDriver,
-    Variant.VF_LPC: _vf_lpc_driver,
-}
-"""The driver of each controller variant: a new variant registers its own here."""
-
-
-def make_driver(config: ControllerConfig, n: int, m: int, q: int,
-                rng: np.random.Generator, **extra: Any) -> Driver:
-    """The driver of ``config.variant`` (``extra``: its own settings, e.g. vf_lpc's ``lpc``)."""
-    return DRIVERS[config.variant](config, n, m, q, rng, **extra)

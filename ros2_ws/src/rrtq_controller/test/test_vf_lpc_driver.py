@@ -13,7 +13,7 @@ import pytest
 
 from rrtq_common.lockstep import OnChange
 from rrtq_controller.config import ControllerConfig, Variant
-from rrtq_controller.driver import make_driver
+from rrtq_controller.drivers import make_driver
 from rrtq_controller.vf_lpc import LPCConfig, fit_edmd
 from rrtq_testing.controller_reference import rover, zoh
 

@@ -14,7 +14,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 from rrtq_common.actor import actor_gain
 from rrtq_common.conversions import MAP_FRAME, time_msg
 
-from .margins.learned import FieldEstimate
+from .margins.learned_data import FieldEstimate
 from .margins.policy import LegInfo, MarginSample, MarginStatus
 from .guidance import GuidanceOutput
 from .rrtx_config import PlanStatus

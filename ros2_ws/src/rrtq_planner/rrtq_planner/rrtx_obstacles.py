@@ -50,7 +50,7 @@ class ObstacleMixin:
     _region_blocked: np.ndarray
     _orphans: list[int]
 
-    if TYPE_CHECKING:  # provided by RRTX / RobotMixin; declared for mypy only
+    if TYPE_CHECKING:  # provided by RewireMixin / RobotMixin; declared for mypy only
 
         def update_lmc(self, v: int) -> None: ...
 

@@ -44,7 +44,7 @@ class RobotMixin:
     goal: int
     region: Region
 
-    if TYPE_CHECKING:  # provided by RRTX; declared for mypy only
+    if TYPE_CHECKING:  # provided by RRTX / RewireMixin; declared for mypy only
 
         def extend(self, point: np.ndarray, near: np.ndarray) -> int | None: ...
 

@@ -19,7 +19,7 @@ from rrtq_common.yaml_reader import Reader, field_default, frozen
 from rrtq_controller.config import ControllerConfig, Variant
 from rrtq_planner.margins.build import MarginConfig
 from rrtq_planner.margins.calibration import read_calibration
-from rrtq_planner.margins.learned import ModelFrame
+from rrtq_planner.margins.learned_data import ModelFrame
 from rrtq_planner.margins.policy import MarginMode
 from rrtq_planner.safety import SafetyConfig
 from rrtq_planner.session import PlannerConfig

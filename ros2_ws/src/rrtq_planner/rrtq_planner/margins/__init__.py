@@ -2,8 +2,9 @@
 
 :mod:`.policy` is the interface the safety side feeds once per step (:func:`.build.make_policy`
 makes one); the modes are ``running_max`` (RRT-QX eqs. 6-7, the paper's), ``conformal``
-(:mod:`.conformal`) and ``learned_bound`` (Jha: :mod:`.learned`, from :mod:`.regression`,
-:mod:`.bank`, :mod:`.tube`). :mod:`.calibration` reads and writes the scores a run carries
+(:mod:`.conformal`) and ``learned_bound`` (Jha: :mod:`.learned`, its margins
+:mod:`.learned_margin` and its data :mod:`.learned_data`, from :mod:`.regression`, :mod:`.bank`,
+:mod:`.tube`). :mod:`.calibration` reads and writes the scores a run carries
 to the next; :mod:`.coverage` gives binomial intervals for checking them; :mod:`.observer`
 is the recursive least-squares model the joint fit of :mod:`.learned` is compared with.
 """

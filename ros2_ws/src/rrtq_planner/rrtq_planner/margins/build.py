@@ -8,7 +8,8 @@ from collections.abc import Sequence
 from rrtq_common.settings import check, setting
 
 from .conformal import ConformalConfig
-from .learned import Bounds, LearnedBoundConfig, LearnedBoundPolicy, ModelFrame
+from .learned import LearnedBoundPolicy
+from .learned_data import Bounds, LearnedBoundConfig, ModelFrame
 from .policy import ConformalPolicy, MarginMode, MarginPolicy, RunningMaxPolicy
 
 __all__ = ['MarginConfig', 'make_policy']

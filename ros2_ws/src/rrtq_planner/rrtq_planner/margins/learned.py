@@ -17,164 +17,30 @@ each step is the cells' bound within the radius the robot can be at, the radius 
 from the levels before (an induction over the steps), and the margin is the deviation across
 the leg's line. Each obstacle is grown by the margin of where it is
 (:meth:`LearnedBoundPolicy.obstacle_margin`).
+
+This module learns (the statistics, the fits, the refutations); turning the fit into the
+leg's tube and the margins is :mod:`.learned_margin`'s, and the settings and data types are
+:mod:`.learned_data`'s.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import enum
 import math
 from collections import deque
-from collections.abc import Callable
 
 import numpy as np
 import shapely
-from scipy.stats import norm
-
-from rrtq_common.settings import check, setting
 
 from .bank import BoundBank
+from .learned_data import Bounds, FieldEstimate, LearnedBoundConfig, LegData, ModelFrame
+from .learned_margin import LearnedMargin
 from .policy import LegTracker, MarginMode, MarginSample, MarginStatus
-from .regression import FieldFit, FieldStatistics, RBFFeatures, fit_field
-from .tube import (expanding, leg_spread, leg_tube_terms, nominal_deviation, nominal_path,
-                   position_covariance)
+from .regression import FieldFit, RBFFeatures, fit_field
 
-__all__ = ['ModelFrame', 'LearnedBoundConfig', 'LearnedBoundPolicy', 'FieldEstimate']
-
-Bounds = tuple[tuple[float, float], tuple[float, float]]
+__all__ = ['Bounds', 'ModelFrame', 'LearnedBoundConfig', 'LearnedBoundPolicy', 'FieldEstimate']
 
 
-class ModelFrame(enum.StrEnum):
-    """Where the observer's one-step model is time-invariant (the rover's spring anchor)."""
-
-    LEG_TARGET = 'leg_target'
-    """x̄ relative to the current leg's target at rest."""
-    WORLD_ORIGIN = 'world_origin'
-    """x̄ = x."""
-
-
-@dataclasses.dataclass(frozen=True)
-class LearnedBoundConfig:
-    """Parameters of ``learned_bound`` (each a :func:`rrtq_common.settings.setting`)."""
-
-    region: Bounds = setting(unit='m', doc="((x_min, x_max), (y_min, y_max)): where the field "
-                             "is learned (the scenario's bounds)")
-    dt: float = setting(unit='s', low=0.0, low_open=True,
-                        doc="the step of the loop (the controller's tau grid over a leg)")
-    frame: ModelFrame = setting(ModelFrame.LEG_TARGET, doc='frame of the one-step model: '
-                                'plant.spring_anchor (either without a spring)')
-    confidence: float = setting(0.95, low=0.0, high=1.0, low_open=True, high_open=True,
-                                doc='1 - delta of the simultaneous band (and of the noise '
-                                'part of the tube)')
-    window: int = setting(50, low=1, doc='legs of residual data the field is fitted on')
-    feature_spacing: float = setting(
-        2.0, unit='m', low=0.0, low_open=True,
-        doc='spacing and length scale of the radial basis functions: at most the length '
-        "scale of the field, or what they cannot fit leaks into the model's coefficients "
-        '(docs/margins.md, section 4.2: at 4 m a 3 m bump softened the learned loop 3x)')
-    ridge: float = setting(1.0, low=0.0, low_open=True,
-                           doc='lambda of the regression (the features are of order 1)')
-    prior_bound: float = setting(
-        0.1, unit='m/s^2', low=0.0, low_open=True,
-        doc='R: the field strength assumed possible before the data say otherwise (Jha\'s '
-        'assumption 3.1); per component of the residual R dt on velocities, R dt^2/2 on '
-        'positions')
-    weight_bound: float = setting(1.5, low=0.0, low_open=True,
-                                  doc="S_c = this x max(|w_c|, R_c): the bound of the field's "
-                                  'weight norm the band assumes')
-    noise_floor: float = setting(1e-5, low=0.0, low_open=True, doc='lower bound of the '
-                                 'residual noise sigma_c, state units per step')
-    cell: float = setting(1.0, unit='m', low=0.0, low_open=True,
-                          doc="spacing of the cells the band's supremum is taken over")
-    reach: float = setting(1.0, unit='m', low=0.0, low_open=True,
-                           doc='a cell counts as visited when a residual was taken within '
-                           'this distance')
-    support: float = setting(
-        0.5, low=0.0, low_open=True,
-        doc="the band's supremum is taken over the visited cells within twice the longest "
-        'leg of the window (at least twice feature_spacing) of the robot where the data have '
-        "cut the band's width to at most this fraction of the prior's: where the next legs "
-        'go and the data say something; elsewhere the bound is extrapolated, and a residual '
-        'above it raises it at once (docs/margins.md, section 3)')
-    bank_ratio: float = setting(0.8, doc='ratio of neighbouring levels of the bank')
-    noise_allowance: float = setting(4.0, doc='a residual raises the bank when a component '
-                                     'exceeds its bound by this many sigma_i')
-    model_prior_precision: float = setting(1e-6, low=0.0, low_open=True,
-                                           doc="mu: precision of the model's prior Phi = I, "
-                                           'Gamma = 0 (negligible against a leg of data)')
-    evaluation_period: float = setting(2.0, unit='s', low=0.0, low_open=True,
-                                       doc='between fits within a leg (a fit also ends every '
-                                       'leg)')
-    recent_legs: int = setting(10, low=1, doc='leg starts (the last ones, the current '
-                               'included) replayed through the current closed loop for the '
-                               'nominal part: how the robot enters its legs now, not during '
-                               'a transient')
-    directions: int = setting(16, doc="directions of a leg's normal the tube is maximised over")
-    robot_radius: float = setting(0.5, unit='m', low=0.0, doc='an obstacle within this of the '
-                                  "current leg's corridor is grown by that leg's margin")
-    hold_steps: int = setting(40, low=1, doc='steps the rest of a leg is bounded over at least '
-                              'when a fit within it re-anchors the tube')
-
-    def __post_init__(self) -> None:
-        check(self, finite=True)
-
-
-@dataclasses.dataclass(frozen=True)
-class FieldEstimate:
-    """The last fit's field and band on the policy's cells (``/safety/disturbance_estimate``).
-
-    Accelerations (m/s²): the residual's velocity rows divided by dt. Cell k is at
-    ``cells[k]``, on a grid of ``shape`` (nx, ny) from ``origin`` at ``spacing``, k = i ny + j.
-    """
-
-    t: float
-    """s, when the fit was made."""
-    origin: tuple[float, float]
-    spacing: float
-    shape: tuple[int, int]
-    mean: np.ndarray
-    """(cells, 2): the fitted field."""
-    band: np.ndarray
-    """(cells, 2): half-width of the simultaneous band."""
-    supported: np.ndarray
-    """(cells,): visited within reach, band cut to at most ``support`` of the prior's."""
-    bound: float
-    """m/s², the bank's level as an acceleration."""
-    confidence: float
-    samples: int
-
-
-class _LegData:
-    """One leg's samples: statistics for the joint fit, visited cells, probing moments."""
-
-    def __init__(self, p: int, n: int, d: int, cells: int) -> None:
-        self.stats = FieldStatistics.zeros(p, n, d)
-        self.visited = np.zeros(cells, dtype=bool)
-        self.probing = np.zeros(3)            # Σ‖p‖², Σ p_k·p_{k−1}, pairs
-        self._last_probe: np.ndarray | None = None
-        self.samples: list[tuple[np.ndarray, np.ndarray, int]] = []
-        """(z, y, cell) of the leg's samples past its first steps: residuals are recomputed
-        against every new fit (docs/margins.md §5.1)."""
-
-    @property
-    def count(self) -> int:
-        return self.stats.count
-
-    def add_probing(self, p: np.ndarray) -> None:
-        lag = 0.0 if self._last_probe is None else float(p @ self._last_probe)
-        self.probing += (float(p @ p), lag, float(self._last_probe is not None))
-        self._last_probe = p.copy()
-
-    def probing_statistics(self, m: int) -> tuple[float, float]:
-        """(stationary std per component, N; lag-one correlation) of the leg's probing."""
-        sq, lag, pairs = self.probing
-        if pairs < 2 or sq <= 0.0:
-            return 0.0, 0.0
-        steps = pairs + 1
-        return math.sqrt(sq / (steps * m)), min(max(lag / sq * steps / pairs, 0.0), 0.999)
-
-
-class LearnedBoundPolicy:
+class LearnedBoundPolicy(LearnedMargin):
     """Margin from a learned residual bound through the current closed loop.
 
     Parameters
@@ -211,8 +77,8 @@ class LearnedBoundPolicy:
         self._prior_residual[:2] = 0.5 * config.prior_bound * config.dt**2
         self.bank = BoundBank(config.bank_ratio)
         self.legs = LegTracker()
-        self.data: deque[_LegData] = deque(maxlen=config.window)
-        self.current: _LegData | None = None
+        self.data: deque[LegData] = deque(maxlen=config.window)
+        self.current: LegData | None = None
         self.theta: np.ndarray | None = None
         """Θ̂ = [Φ̂ | Γ̂] (n, n + m) of the last fit; None before the first."""
         self.sigma = np.full(n, config.noise_floor)
@@ -291,7 +157,7 @@ class LearnedBoundPolicy:
         if self.legs.new_leg:
             if self.current is not None:
                 self.data.append(self.current)
-            self.current = _LegData(self.features.size, self.n, self.d, len(self.cells))
+            self.current = LegData(self.features.size, self.n, self.d, len(self.cells))
         raised = self._learn(state, sample)
         if self.legs.new_leg:
             self._fit(sample.t, state)
@@ -384,7 +250,7 @@ class LearnedBoundPolicy:
         j = min(max(int(round((p[1] - y0) / self.config.cell)), 0), self._ny - 1)
         return i * self._ny + j
 
-    def _refutations(self, blocks: list[_LegData]) -> None:
+    def _refutations(self, blocks: list[LegData]) -> None:
         """Recompute every cell's three largest residuals against the model just fitted.
 
         Residuals of an early, poorly excited model must not refute the prior for good
@@ -466,207 +332,6 @@ class LearnedBoundPolicy:
         self._cell_band = (mean, half, firm & visited)
         self.fits += 1
 
-    def _follow_band(self) -> None:
-        """The field's bound step by step along the current leg, and the leg's tube with it.
-
-        docs/margins.md §5.1. At step 0 the robot is at the leg's start; if at each step j < k
-        it was within radius_j of its undisturbed position, the field it met there was at most
-        ℓ_j, the bound of the cells within radius_j (ceil to the bank's rungs), so at step k it
-        is within radius_k = max_c Σ_j ℓ_j terms[k, j, c] / cos(π/2D) + z spread_k of it: by
-        induction the levels and radii hold over the whole leg, and across its line the
-        deviation is at most nominal_k + Σ_j ℓ_j along[k, j] + z along_spread_k. Without a
-        leg (no model or gain yet) the bank follows the band over the region near the robot.
-        """
-        if self.cell_bound is None:
-            return
-        bound = self.cell_bound
-        if self.path is None or self.tube is None or self.spread is None:
-            if self.region.any():
-                self.bank.evaluate(float(bound[self.region].max()))
-            return
-        c = self.config
-        z = self._z()
-        pad = c.cell * math.sqrt(0.5)   # a cell's square within the disc
-        widen = 1.0 / math.cos(math.pi / (2 * c.directions))
-        N = len(self.tube)
-        levels = np.zeros(N + 1)
-        radius = np.full(N + 1, pad)
-        for k in range(N + 1):
-            d = np.hypot(*(self.cells - self.points[k]).T)
-            near = d <= radius[k]
-            levels[k] = self.bank.ceil(float(bound[near].max())) if near.any() else 0.0
-            if math.isinf(levels[k]):
-                levels[k:] = math.inf
-                break
-            if k < N:
-                radius[k + 1] = (widen * float((levels[:k + 1] @ self.terms[k, :k + 1]).max())
-                                 + z * float(self.spread[k]) + pad)
-        self.levels, self.radius = levels, radius
-        if np.isinf(levels).any():
-            self.across = np.full(N, math.inf)
-        else:
-            terms = (self.along_terms if self.along_terms is not None
-                     else self.terms.max(axis=2) * widen)
-            self.across = (self.path_deviation + np.einsum('kj,j->k', terms, levels[:N])
-                           + z * self.along_spread)
-        inside = np.zeros(len(self.cells), dtype=bool)
-        for k in range(0, N + 1, max(N // 50, 1)):
-            inside |= np.hypot(*(self.cells - self.points[k]).T) <= radius[k]
-        self.corridor = inside
-        self.bank.evaluate(float(levels.max()))
-        self._local.clear()
-
-    def _least_level(self, bound: np.ndarray,
-                     region: Callable[[float], np.ndarray]) -> tuple[float, np.ndarray]:
-        """The least rung ℓ with ceil(sup of ``bound`` over ``region(ℓ)``) <= ℓ, and its region.
-
-        ``region`` grows with ℓ, so iterating ℓ ← ceil(sup over region(ℓ)) from ℓ = 0 rises to
-        the least such rung (or to inf).
-        """
-        level = 0.0
-        inside = region(level)
-        for _ in range(200):
-            higher = self.bank.ceil(float(bound[inside].max())) if inside.any() else 0.0
-            if higher <= level or math.isinf(higher):
-                level = max(level, higher)
-                break
-            level = higher
-            inside = region(level)
-        return level, inside
-
     def _leg_lengths(self) -> list[float]:
         return [float(np.linalg.norm(s[:2] - g)) for _, s, g in
                 self.legs.started[-(self.config.window + 1):]]
-
-    # ------------------------------------------------------------------ margin
-    def _new_tube(self, sample: MarginSample, state: np.ndarray | None = None) -> None:
-        """The current leg under the closed loop the controller runs now (docs/margins.md §5).
-
-        Its undisturbed path from its start state, and per step the tube (per unit level) and
-        the random part's standard deviation, across the leg's line and in the worst direction
-        (the latter for the corridor the field is bounded over). With ``state`` (a fit within
-        the leg): the rest of the leg, from the current state on (§5.1, re-anchoring).
-        """
-        self.path = None
-        if state is None:
-            self.whole_leg = None
-        if sample.gain is None or sample.horizon <= 0.0 or self.theta is None \
-                or sample.leg is None or not self.legs.started:
-            self.tube = None
-            return
-        # A leg lasts at most the horizon; the tube runs as long as the window's longest leg
-        # (the horizon until a leg has ended), and a longer leg raises the margin as it goes.
-        steps = max(int(round(sample.horizon / self.config.dt)), 1)
-        recent = self.legs.durations[-self.config.window:]
-        if recent:
-            steps = min(steps, max(max(recent), 1))
-        elapsed = 0 if state is None else self.legs.leg_steps
-        # The rest of the leg, at least `hold_steps` (a robot held at its last target stays).
-        steps = max(steps - elapsed, self.config.hold_steps) if elapsed else steps
-        taus = np.maximum(sample.horizon - self.config.dt * (elapsed + np.arange(steps)), 0.0)
-        gains = np.stack([np.asarray(sample.gain(float(tau)), dtype=float) for tau in taus])
-        phi, gamma = self.theta[:, :self.n], self.theta[:, self.n:]
-        if expanding(phi, gamma, gains):
-            # The model's closed loop expands: its tube bounds nothing; the margin falls back
-            # to the initial one (the running max) until a fit gives a contracting model.
-            self.tube = None
-            return
-        offset = np.zeros((self.n, 2))
-        if self.config.frame is ModelFrame.WORLD_ORIGIN:
-            offset = (phi - np.eye(self.n))[:, :2]
-        # D_rob is measured from the line through the leg's start and target (leg.start, as
-        # the controller reports it); the replay starts from the full state at the leg start.
-        start = np.asarray(self.legs.started[-1][1] if state is None else state, dtype=float)
-        origin = np.asarray(sample.leg.start, dtype=float)[:2]
-        target = np.asarray(sample.leg.target, dtype=float)[:2]
-        line = target - origin
-        length = float(np.linalg.norm(line))
-        normal = np.array([-line[1], line[0]]) / length if length > 1e-12 else None
-        self.terms, along_terms = leg_tube_terms(phi, gamma, gains, self._prior_residual,
-                                                 normal, self.config.directions)
-        self.tube = self.terms.sum(axis=1).max(axis=1) / math.cos(
-            math.pi / (2 * self.config.directions))
-        along = along_terms.sum(axis=1)
-        # The probing of the last finished leg: it decays from leg to leg.
-        source = self.data[-1] if self.data else self.current
-        std, corr = source.probing_statistics(self.m) if source is not None else (0.0, 0.0)
-        self.spread, along_spread = leg_spread(
-            position_covariance(phi, gamma, gains, self.sigma, std, corr), normal)
-        if state is None:
-            self.whole_leg = (self.tube, self.spread)
-        self.path, self.path_deviation = nominal_path(phi, gamma, offset, gains, start, target,
-                                                      origin)
-        # A zero-length leg has no line: its deviation is the distance from the target, which
-        # the worst direction bounds.
-        # A zero-length leg: across "its line" is any direction (the worst one's terms, the
-        # widening applied when they are summed).
-        self.along_terms = along_terms if normal is not None else None
-        self.along = along if normal is not None else self.tube
-        self.along_spread = along_spread if normal is not None else self.spread
-        self.points = np.vstack([start[:2], self.path])
-        self.nominal = float(self.path_deviation.max())
-        starts = self.legs.started[-self.config.recent_legs:]
-        self.recent_nominal = float(nominal_deviation(
-            phi, gamma, offset, gains, np.array([s for _, s, _ in starts]),
-            np.array([g for _, _, g in starts])).max())
-        self._local.clear()
-
-    def _z(self, tube: np.ndarray | None = None) -> float:
-        # The random part must hold over the whole leg: a union bound over its steps.
-        tube = self.tube if tube is None else tube
-        steps = len(tube) if tube is not None else 1
-        return float(norm.ppf(1.0 - 0.5 * self._delta / steps))
-
-    def _model_margin(self) -> float:
-        if self.path is None or math.isinf(self.bank.level) or len(self.across) == 0:
-            return math.inf
-        return float(self.across.max())
-
-    def obstacle_margin(self, oid: str, polygon: np.ndarray) -> float:
-        """The margin (m) of one obstacle by where it is (docs/margins.md §5.1).
-
-        A prediction for the legs that will pass it: the worst-direction tube and spread at
-        the least consistent level (:meth:`_least_level`) of the field within the feature
-        spacing (the field's length scale) plus twice that tube of the obstacle, the
-        direction and start of those legs unknown. The guarantee is the current leg's: an
-        obstacle its corridor comes within the robot radius of is grown by at least the
-        current leg's margin (its nominal part included), recomputed at each leg start.
-        """
-        key = (oid, np.ascontiguousarray(polygon, dtype=float).tobytes())
-        if key not in self._local:
-            shape = shapely.Polygon(polygon)
-            gaps = (np.asarray(shapely.distance(shape, shapely.points(self.points)), dtype=float)
-                    if self.path is not None and len(self.radius) == len(self.points)
-                    else np.zeros(0))
-            self._local[key] = (self._neighbourhood_margin(shape), gaps)
-        generic, gaps = self._local[key]
-        # The bound of the leg's motion from the last anchor on (its past deviation, which
-        # the status's margin keeps, is history for the obstacles).
-        now = self._margin()
-        if len(gaps) and np.any(gaps <= np.maximum(self.radius, now) + self.config.robot_radius):
-            return max(generic, now)
-        return generic
-
-    def _neighbourhood_margin(self, shape: shapely.Polygon) -> float:
-        if self.cell_bound is None or self.tube is None or self.whole_leg is None:
-            return max(self._margin(), self.legs.leg_max)
-        tube, spread = self.whole_leg
-        z = self._z(tube)
-        dist = np.asarray(shapely.distance(shape, self._cell_points), dtype=float)
-        scale = self.config.feature_spacing
-        pad = self.config.cell * math.sqrt(0.5)
-        level, _ = self._least_level(
-            self.cell_bound,
-            lambda lv: np.asarray(dist <= scale + 2.0 * float((lv * tube + z * spread).max())
-                                  + pad))
-        if math.isinf(level):
-            return max(self._margin(), self.legs.leg_max)
-        # No nominal part: how a future leg is entered (its start velocity against its line)
-        # is known when it starts, and then its own margin grows the obstacles near it.
-        return float((level * tube + z * spread).max())
-
-    def _fallback(self) -> float:
-        return self.legs.d_rob_max if self.initial_margin is None else self.initial_margin
-
-    def _margin(self) -> float:
-        return self._fallback() if math.isinf(self.model_margin) else self.model_margin

@@ -38,8 +38,8 @@ import tempfile
 import time
 from typing import Any
 
-from rrtq_bringup.bench_local import GRACE_S, Job, Progress, describe, judge, row, start_run
-from rrtq_bringup.bench_table import machine
+from rrtq_bringup.bench.local_engine import GRACE_S, Job, Progress, describe, judge, row, start_run
+from rrtq_bringup.bench.table import machine
 
 __all__ = ['RayEngine', 'RayUnavailable', 'cluster_text', 'run_task']
 
@@ -151,7 +151,7 @@ def _first_line(exc: BaseException) -> str:
 
 
 class RayEngine:
-    """Runs the jobs as Ray tasks; the same rows as :class:`bench_local.Scheduler`."""
+    """Runs the jobs as Ray tasks; the same rows as :class:`.local_engine.Scheduler`."""
 
     def __init__(self, jobs: list[Job], address: str | None, workers: int,
                  run_timeout: float, progress: Progress) -> None:

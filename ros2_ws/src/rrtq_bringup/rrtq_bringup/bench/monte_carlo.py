@@ -1,19 +1,19 @@
 """``rrtq bench``: Monte Carlo over seeds, random obstacle layouts and configurations.
 
 For each seed the base scenario gets a random obstacle layout
-(:mod:`rrtq_bringup.bench_layouts`), written to ``RUNS/seed-NNN/scenario.yaml``, and
+(:mod:`rrtq_bringup.bench.layouts`), written to ``RUNS/seed-NNN/scenario.yaml``, and
 runs there as ``rrtq run --mode composed --speed max`` (lock-step: the seed fixes the
-run).  ``--set KEY=V1,V2`` (repeatable, :mod:`rrtq_bringup.bench_sweep`) makes a
+run).  ``--set KEY=V1,V2`` (repeatable, :mod:`rrtq_bringup.bench.sweep`) makes a
 sweep: every configuration of the cross product runs every seed, in
 ``RUNS/cfg-NN/seed-NNN/``.  The engine runs them: ``local`` (default) ``--workers``
-at a time on this machine (:mod:`rrtq_bringup.bench_local`), ``ray`` as Ray tasks
-on a cluster (:mod:`rrtq_bringup.bench_ray`).  A progress bar on stderr counts
+at a time on this machine (:mod:`rrtq_bringup.bench.local_engine`), ``ray`` as Ray tasks
+on a cluster (:mod:`rrtq_bringup.bench.ray_engine`).  A progress bar on stderr counts
 runs, successes and the time left; Ctrl-C or SIGTERM interrupts the runs in flight
 (each ends its recording and summary) and writes the table of what completed.
 
-The table (:mod:`rrtq_bringup.bench_table`) goes to ``OUT/monte_carlo.md`` and
+The table (:mod:`rrtq_bringup.bench.table`) goes to ``OUT/monte_carlo.md`` and
 ``OUT/monte_carlo.json``; a sweep writes ``OUT/sweep.md``, ``.json`` and ``.png``
-(:mod:`rrtq_bringup.bench_sweep_table`), a row per configuration.  Exit code 0 when
+(:mod:`rrtq_bringup.bench.sweep_table`), a row per configuration.  Exit code 0 when
 every run completed, whatever its mission outcome; 1 when a run crashed, timed out
 or failed on the engine; 2 on bad input (nothing started); 130 when interrupted.
 """
@@ -34,21 +34,21 @@ from typing import Any
 
 import yaml
 
-from rrtq_bringup.bench_control import evaluate
-from rrtq_bringup.bench_layouts import (Layout, LayoutConfig, LayoutError, generate_layout,
+from rrtq_bringup.bench.control import evaluate
+from rrtq_bringup.bench.layouts import (Layout, LayoutConfig, LayoutError, generate_layout,
                                         layout_scenario)
-from rrtq_bringup.bench_local import Job, Progress, Scheduler
+from rrtq_bringup.bench.local_engine import Job, Progress, Scheduler
 # Imports no ray: the Ray engine imports it when it starts.
-from rrtq_bringup.bench_ray import RayEngine, RayUnavailable, cluster_text
-from rrtq_bringup.bench_sweep import SweepError, apply, configurations, label, parse_setting
-from rrtq_bringup.bench_sweep_table import sweep_markdown, sweep_plot
-from rrtq_bringup.bench_table import COMPLETED, aggregate, machine, markdown
+from rrtq_bringup.bench.ray_engine import RayEngine, RayUnavailable, cluster_text
+from rrtq_bringup.bench.sweep import SweepError, apply, configurations, label, parse_setting
+from rrtq_bringup.bench.sweep_table import sweep_markdown, sweep_plot
+from rrtq_bringup.bench.table import COMPLETED, aggregate, machine, markdown
 from rrtq_bringup.orchestrator import BadInput, check_supported
 from rrtq_bringup.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
 from rrtq_controller.config import Variant
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
-ROOT = pathlib.Path(os.environ.get('RRTQ_ROOT', pathlib.Path(__file__).resolve().parents[4]))
+ROOT = pathlib.Path(os.environ.get('RRTQ_ROOT', pathlib.Path(__file__).resolve().parents[5]))
 
 
 def _count(low: int) -> Callable[[str], int]:

@@ -1,7 +1,7 @@
 """The table and the plot of a sweep: one row, one column of the plot, per configuration.
 
 Each configuration's runs are aggregated as the Monte Carlo table aggregates
-them (:func:`rrtq_bringup.bench_table.aggregate`): rates over the completed
+them (:func:`rrtq_bringup.bench.table.aggregate`): rates over the completed
 runs, time and path / optimum over the successful ones.
 """
 
@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from rrtq_bringup.bench_table import COMPLETED, cell, control_cell, num, pct
+from rrtq_bringup.bench.table import COMPLETED, cell, control_cell, num, pct
 
 __all__ = ['sweep_markdown', 'sweep_plot']
 

@@ -8,10 +8,10 @@
   maximum, the learned weights (each panel only when its topics were recorded);
 - ``margins.png`` (the margin against the legs' realised deviations) and, for
   ``learned_bound``, ``field.png`` (the learned field against the true one), the summary's
-  ``margins`` entry (:mod:`rrtq_bringup.report_margins`);
+  ``margins`` entry (:mod:`rrtq_bringup.report.margins`);
 - ``vf_lpc.png`` and the summary's ``vf_lpc`` entry for a vf_lpc run
-  (:mod:`rrtq_bringup.report_vf_lpc`);
-- with ``--video``, ``run.mp4`` or ``run.gif`` (:mod:`rrtq_bringup.video`);
+  (:mod:`rrtq_bringup.report.vf_lpc`);
+- with ``--video``, ``run.mp4`` or ``run.gif`` (:mod:`rrtq_bringup.report.video`);
 - ``summary.json``: path length, control effort, clearance against the true obstacles,
   time to goal, legs — from the recorded messages and the scenario embedded in the file;
   the path, clearance and time to goal of the true state (/odom/truth) where recorded,
@@ -35,8 +35,8 @@ from rrtq_bringup.leg_table import LegTable, leg_table  # noqa: E402
 from rrtq_bringup.leg_table import summary as leg_summary  # noqa: E402
 from rrtq_bringup.run_data import RunData, embedded_scenario, read_run, recorded_scenario  # noqa: E402
 from rrtq_bringup.mission import MissionConfig  # noqa: E402
-from rrtq_bringup.report_margins import margins_summary  # noqa: E402
-from rrtq_bringup.report_vf_lpc import is_vf_lpc, plot_vf_lpc, vf_lpc_summary  # noqa: E402
+from rrtq_bringup.report.margins import margins_summary  # noqa: E402
+from rrtq_bringup.report.vf_lpc import is_vf_lpc, plot_vf_lpc, vf_lpc_summary  # noqa: E402
 from rrtq_common.polygon_set import PolygonSet  # noqa: E402
 from rrtq_common.yaml_reader import field_default  # noqa: E402
 
@@ -253,7 +253,7 @@ def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = N
     """Write the figures and summary for ``recording``; return the summary.
 
     ``video_interval`` (s of sim time per frame): also the animation of the run
-    (:func:`rrtq_bringup.video.write_video`), named in the summary as ``video``.
+    (:func:`rrtq_bringup.report.video.write_video`), named in the summary as ``video``.
     """
     recording = pathlib.Path(recording)
     out = pathlib.Path(out_dir) if out_dir else recording.parent / 'report'
@@ -282,7 +282,7 @@ def report(recording: str | pathlib.Path, out_dir: str | pathlib.Path | None = N
         summary['vf_lpc'] = vf_lpc_summary(data, scenario)
         plot_vf_lpc(data, out / 'vf_lpc.png')
     if video_interval is not None:
-        from rrtq_bringup.video import write_video
+        from rrtq_bringup.report.video import write_video
         summary['video'] = str(write_video(data, scenario, recording, out,
                                            interval=video_interval, fps=video_fps))
     (out / 'summary.json').write_text(json.dumps(summary, indent=2) + '\n')

@@ -17,7 +17,7 @@ import time
 from collections import deque
 from typing import Any, TextIO
 
-from rrtq_bringup.bench_table import COMPLETED
+from rrtq_bringup.bench.table import COMPLETED
 from rrtq_bringup.node_processes import die_with_parent
 
 GRACE_S = 30.0       # wall time an interrupted run gets to write its summary

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from rrtq_bringup.bench_control import aggregate_control
+from rrtq_bringup.bench.control import aggregate_control
 
 __all__ = ['aggregate', 'machine', 'markdown', 'wilson']
 
@@ -124,7 +124,7 @@ def pct(value: float | None) -> str:
 
 
 def control_rows(c: dict[str, Any] | None) -> list[tuple[str, str]]:
-    """The controller's lines of the Monte Carlo table (:mod:`rrtq_bringup.bench_control`)."""
+    """The controller's lines of the Monte Carlo table (:mod:`rrtq_bringup.bench.control`)."""
     if c is None:
         return []
     return [('last-ten leg cost / Riccati policy through the same disturbance, noise and delay '
