@@ -6,7 +6,7 @@ layout per seed, no controller key: no initial gain, the defaults) with its plan
 ``--set``. Per row: goals with their 95 % interval (Wilson), collisions, runs out of bounds,
 time to goal, path over the layout's optimum, the last ten legs' cost against the Riccati
 optimum from each leg's start (its range over the runs, and the runs within 5 %) and against
-the true Riccati policy flown through the same run (``rrtq_bringup.bench_control``), and the
+the true Riccati policy flown through the same run (``rrtq_bringup.bench.control``), and the
 largest command against the actuator's limit. Targets (issue 9): every goal, no collision,
 no command beyond the limit, the last ten legs within 5 % of the optimum.
 
