@@ -253,6 +253,12 @@ class ControllerConfig:
                                        "the stored samples' (held at its value there below)")
     """Where the critic has no data its greedy gain is the time basis' extrapolation
     (:func:`guard.held_below`); 0: follow it on the whole horizon (the papers)."""
+    rollout_test: bool = setting(True, doc='guard, with the observer: a proposal that '
+                                 'carries a robot at rest farther from its target than the '
+                                 'current policy does, flown through the identified model, '
+                                 'is not adopted')
+    """Reads a proposal through the plant as identified, not through the critic that proposed
+    it (:mod:`rrtq_controller.rollout`); false: the guard without it."""
     trust_growth: float = setting(1.0, **_POSITIVE, doc='guard: trust region of one adoption, '
                                   '|dK(τ)| <= trust_growth max(|K(τ)|, K_floor)')
     """The gain may grow by this factor per adoption (1: double), from a floor set by the

@@ -48,7 +48,7 @@ _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
     'probing_line_fraction', 'force_limit', 'measured_disturbance', 'observer',
-    'disturbance_estimate', 'model', 'vf_lpc',
+    'disturbance_estimate', 'rollout_test', 'model', 'vf_lpc',
 )  # fmt: skip
 # planner key -> the settings dataclass it belongs to
 _PLANNER_KEYS: dict[str, type] = {
@@ -287,7 +287,8 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
         initial_gain=gain,
         **{name: r.boolean(data.get(name, field_default(ControllerConfig, name)),
                            f'controller.{name}')
-           for name in ('measured_disturbance', 'observer', 'disturbance_estimate')},
+           for name in ('measured_disturbance', 'observer', 'disturbance_estimate',
+                        'rollout_test')},
         **weights, **numbers)
 
 

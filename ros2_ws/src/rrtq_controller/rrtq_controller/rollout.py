@@ -1,0 +1,123 @@
+"""Does a policy carry the robot away from its target? Its closed loop under the identified model.
+
+The guard's other tests read a proposal through the critic that proposed it; where the
+critic is biased they share its bias. Under odometry noise and a two-step actuation delay
+the critic proposed gains whose position part changes sign at mid-horizon (K̂_yy(5 s) =
+-14 N/m on the rover without a spring, where the optimum's is positive at every time to
+go): the robot drove at its target for three seconds, turned, and left its leg at 1.5 m/s
+until the divergence watch stopped it; twice in 20 missions it hit an obstacle or left the
+world first. This test reads the proposal through the plant instead, as the observer has
+identified it from odometry and commanded forces alone (:class:`observer.OneStepModel`:
+Φ and the lagged Γ_j, so that the delay is in it).
+
+A robot at rest at a unit offset from its target, starting at a time to go τ_s, is flown
+by the proposal's gain K̂(τ) through the identified model to the end of the horizon,
+every input lag at zero. Its offset at each later step is Ψ(τ_s → τ) e (Ψ the position
+block of the closed loop's transition matrix), and the worst direction's growth is the
+spectral norm ‖Ψ(τ_s → τ)‖. The proposal *carries the robot away* when, from some start,
+that norm exceeds the one of the same model with no force at all (≥ 1: a robot that is
+not pushed stays where it is, up to what the identified model's own drift makes of it) by
+more than a tolerance. It is a comparison with doing nothing: a policy that makes a robot
+at rest end up farther from its target than standing still would is not a controller for
+that target. The tolerance is the controller's own resolution of a leg, ρ (a leg has
+arrived at D <= ρ D0: an excess below ρ times the offset is within what a leg counts as
+there), or what the policy in use already does if that is more (the guard then stops an
+escalation, where it starts). The finite-horizon LQ optimum passes: on this plant its
+position gain is positive at every time to go and from rest it only ever closes the offset.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .observer import OneStepModel
+
+Array = NDArray[np.float64]
+
+@dataclass(frozen=True)
+class AwayFrom:
+    """Where a policy carries a robot at rest farther than standing still would."""
+
+    start: float
+    """τ_s (s): the time to go it started from."""
+    tau: float
+    """τ (s): where its offset was the largest against standing still."""
+    growth: float
+    """‖Ψ(τ_s → τ)‖ under the policy."""
+    still: float
+    """The same with no force (the identified model's own drift)."""
+
+    @property
+    def excess(self) -> float:
+        """``growth`` - ``still``: how much farther than standing still, per unit offset."""
+        return self.growth - self.still
+
+    def __str__(self) -> str:
+        return (f'carries a robot at rest from time to go {self.start:.2f} s to '
+                f'{self.growth:.3g} x its offset at {self.tau:.2f} s (standing still: '
+                f'{self.still:.3g} x; excess {self.excess:.3g}) under the identified model')
+
+
+def closed_loop(model: OneStepModel, gains: Array) -> Array:
+    """The transition matrices of the delayed closed loop, one per step.
+
+    ``gains`` (S, m, n): K̂ at each step, u_k = -K̂ x̄_k. State [x̄_k, u_{k-1}, ..., u_{k-J}],
+    x̄_{k+1} = Φ x̄_k + Γ_0 u_k + Σ_{j>=1} Γ_j u_{k-j}. Returns (S, N, N), N = n + J m.
+    """
+    n, m = model.phi.shape[0], model.gammas.shape[2]
+    lags = model.gammas.shape[0] - 1
+    size = n + lags * m
+    steps = len(gains)
+    T = np.zeros((steps, size, size))
+    T[:, :n, :n] = model.phi - np.einsum('im,smn->sin', model.gammas[0], gains)
+    for j in range(1, lags + 1):
+        T[:, :n, n + (j - 1) * m:n + j * m] = model.gammas[j]
+    if lags:
+        T[:, n:n + m, :n] = -gains
+        for j in range(1, lags):
+            T[:, n + j * m:n + (j + 1) * m, n + (j - 1) * m:n + j * m] = np.eye(m)
+    return T
+
+
+def worst_growth(transitions: Array, positions: int, start: int) -> Array:
+    """‖Ψ(start → k)‖ for k = start+1 .. S: the position block, from rest (S - start,)."""
+    size = transitions.shape[1]
+    X = np.zeros((size, positions))
+    X[:positions, :positions] = np.eye(positions)
+    blocks = np.empty((len(transitions) - start, positions, positions))
+    for i, T in enumerate(transitions[start:]):
+        X = T @ X
+        blocks[i] = X[:positions]
+    return np.asarray(np.linalg.norm(blocks, 2, axis=(1, 2)), dtype=float)
+
+
+def carries_away(model: OneStepModel, gain: Callable[[float], Array], horizon: float,
+                 dt: float, starts: Sequence[float] | Array) -> AwayFrom:
+    """Where the policy ``gain`` (τ -> K̂(τ), m x n) carries a robot at rest farthest away.
+
+    From each time to go in ``starts`` to the end of the horizon, in steps of ``dt``,
+    against the same model with no force (see the module's docstring): the start and step
+    of the largest excess over standing still (negative where it closes the offset
+    everywhere).
+    """
+    m, n = model.gammas.shape[2], model.phi.shape[0]
+    steps = max(int(round(horizon / dt)), 1)
+    taus = horizon - dt * np.arange(steps)
+    gains = np.array([gain(float(t)) for t in taus])
+    moved = closed_loop(model, gains)
+    still = closed_loop(model, np.zeros((steps, m, n)))
+    worst: AwayFrom | None = None
+    for start_tau in starts:
+        start = min(max(int(round((horizon - float(start_tau)) / dt)), 0), steps - 1)
+        ours = worst_growth(moved, m, start)
+        base = np.maximum(worst_growth(still, m, start), 1.0)
+        k = int(np.argmax(ours - base))
+        if worst is None or ours[k] - base[k] > worst.excess:
+            worst = AwayFrom(float(taus[start]), float(taus[start] - dt * (k + 1)),
+                             float(ours[k]), float(base[k]))
+    assert worst is not None, 'no start'
+    return worst
