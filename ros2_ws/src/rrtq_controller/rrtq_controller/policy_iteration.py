@@ -24,6 +24,7 @@ from .critic import Fit, LeastSquaresCritic, fit, residual
 from .guard import FALSE_ALARM, Brake, PolicyEvent, Sensing, held_below, trust_step
 from .observer import Observer
 from .readout import WeightReadout
+from .rollout import AwayFrom, carries_away
 
 Array = NDArray[np.float64]
 
@@ -211,6 +212,8 @@ class PolicyIteration(WeightReadout):
             elif (self._completed is not None and self._full_legs < c.widen_after_legs
                   and not self._definite_value(proposal, *cand)):
                 why = 'value kernel not positive definite on [T/2, T]'
+            elif (away := self._carries_away(cand[0])) is not None:
+                why = str(away)
             else:
                 self._target = (cand[0].copy(), cand[1].copy())
                 self._adopted_since = True
@@ -218,6 +221,29 @@ class PolicyIteration(WeightReadout):
                 return
             s *= 0.5
         self._note(PolicyEvent.REJECTED, f'proposal (step {2 * s:.3g}): {why}')
+
+    def _carries_away(self, Wa: Array) -> AwayFrom | None:
+        """Where a proposal carries a robot at rest away, beyond what the guard tolerates.
+
+        Through the observer's identified model (:func:`rollout.carries_away`), from eight
+        times to go over the horizon: its relative excess over standing still may be at most
+        what the divergence watch lets run (``divergence_distance`` - 1), or the current
+        target's own if that is more (an escalation is stopped where it
+        starts). None when it passes, without a model, or with ``rollout_test`` off.
+        """
+        c = self.config
+        if not c.rollout_test or self.observer is None or self.observer.model is None:
+            return None
+        model = self.observer.model
+        starts = np.linspace(c.horizon, c.dt, 8)
+
+        def away(W: Array) -> AwayFrom:
+            return carries_away(model, partial(self.gain, Wa=W), c.horizon, c.dt, starts)
+        ours = away(Wa)
+        if (ours.excess <= c.divergence_distance - 1.0
+                or ours.excess <= away(self._target[0]).excess):
+            return None
+        return ours
 
     def _force_scale(self, u_applied: Array) -> float:
         """N: the probing scale, or the RMS force applied in the stored data if larger.

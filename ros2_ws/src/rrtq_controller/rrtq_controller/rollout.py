@@ -16,14 +16,15 @@ every input lag at zero. Its offset at each later step is Ψ(τ_s → τ) e (Ψ 
 block of the closed loop's transition matrix), and the worst direction's growth is the
 spectral norm ‖Ψ(τ_s → τ)‖. The proposal *carries the robot away* when, from some start,
 that norm exceeds the one of the same model with no force at all (≥ 1: a robot that is
-not pushed stays where it is, up to what the identified model's own drift makes of it) by
-more than a tolerance. It is a comparison with doing nothing: a policy that makes a robot
-at rest end up farther from its target than standing still would is not a controller for
-that target. The tolerance is the controller's own resolution of a leg, ρ (a leg has
-arrived at D <= ρ D0: an excess below ρ times the offset is within what a leg counts as
-there), or what the policy in use already does if that is more (the guard then stops an
-escalation, where it starts). The finite-horizon LQ optimum passes: on this plant its
-position gain is positive at every time to go and from rest it only ever closes the offset.
+not pushed stays where it is, up to what the identified model's own drift makes of it) by a
+factor beyond a tolerance. It is a comparison with doing nothing: a policy that makes a
+robot at rest end up much farther from its target than standing still would is not a
+controller for that target. The tolerance is the divergence watch's own (a leg diverges at
+D > ``divergence_distance`` D0, twice the start by default: a relative excess of at most
+``divergence_distance`` - 1 is a rollout the watch would let run), or what the policy in
+use already does if that is more (the guard then stops an escalation, where it starts). The
+finite-horizon LQ optimum passes: on this plant its position gain is positive at every time
+to go and from rest it only ever closes the offset.
 """
 
 from __future__ import annotations
@@ -53,8 +54,8 @@ class AwayFrom:
 
     @property
     def excess(self) -> float:
-        """``growth`` - ``still``: how much farther than standing still, per unit offset."""
-        return self.growth - self.still
+        """``growth`` / ``still`` - 1: how much farther than standing still, relatively."""
+        return self.growth / self.still - 1.0
 
     def __str__(self) -> str:
         return (f'carries a robot at rest from time to go {self.start:.2f} s to '
@@ -115,8 +116,8 @@ def carries_away(model: OneStepModel, gain: Callable[[float], Array], horizon: f
         start = min(max(int(round((horizon - float(start_tau)) / dt)), 0), steps - 1)
         ours = worst_growth(moved, m, start)
         base = np.maximum(worst_growth(still, m, start), 1.0)
-        k = int(np.argmax(ours - base))
-        if worst is None or ours[k] - base[k] > worst.excess:
+        k = int(np.argmax(ours / base))
+        if worst is None or ours[k] / base[k] - 1.0 > worst.excess:
             worst = AwayFrom(float(taus[start]), float(taus[start] - dt * (k + 1)),
                              float(ours[k]), float(base[k]))
     assert worst is not None, 'no start'

@@ -51,10 +51,10 @@ def test_a_position_gain_that_turns_negative_mid_horizon_carries_the_robot_away(
 
     def flipped(tau):
         K = optimum(tau).copy()
-        K[1, 1] *= np.clip((tau - 5.0) / 2.0, -1.0, 1.0)
+        K[1, 1] *= np.clip((tau - 5.0) / 2.0, -2.0, 1.0)
         return K
     away = carries_away(model(2), flipped, T, DT, STARTS)
-    assert away.excess > 0.5, away                   # well beyond the tolerance rho = 0.15
+    assert away.excess > 1.0, away                   # beyond twice standing still: diverged
     assert away.start < 5.0 + 2.0 and away.tau < away.start
     assert 'carries a robot at rest' in str(away)
 
@@ -107,7 +107,7 @@ def test_the_guard_rejects_a_proposal_that_carries_the_robot_away(on):
 
     def flipped(tau):
         K = optimum(tau).copy()
-        K[1, 1] *= np.clip((tau - 5.0) / 2.0, -1.0, 1.0)
+        K[1, 1] *= np.clip((tau - 5.0) / 2.0, -2.0, 1.0)
         return K
     W = weights_of(ctrl, optimum)
     assert np.allclose(ctrl.gain(3.0, W), optimum(3.0), atol=0.05 * np.abs(optimum(3.0)).max())
@@ -115,7 +115,7 @@ def test_the_guard_rejects_a_proposal_that_carries_the_robot_away(on):
     away = ctrl._carries_away(weights_of(ctrl, flipped))
     assert (away is not None) is on
     if on:
-        assert away.excess > ctrl.config.rho
+        assert away.excess > ctrl.config.divergence_distance - 1.0
         # an escalation is judged against the policy in use: from the flipped one, the same
         # proposal is no worse and passes
         ctrl._target = (weights_of(ctrl, flipped), ctrl._target[1])
