@@ -30,26 +30,29 @@ def save(name: str, results: dict, table: str) -> None:
 
 
 def rrtq_bench(name: str, base: pathlib.Path, out: pathlib.Path, options: list[str],
-               settings: list[str]) -> tuple[dict, str]:
+               settings: list[str], run: bool = True) -> tuple[dict, str]:
     """Run ``rrtq bench BASE`` into ``out`` with ``options`` and ``--set`` ``settings``.
 
     Returns its sweep table (``out/sweep.json``) and the command as a user types it. Exit
     codes 0 and 1 (a run that failed on its engine) leave a table; any other stops the
-    benchmark.
+    benchmark. ``run=False`` reads the table an earlier run left in ``out``.
     """
     cmd = [str(ROOT / 'scripts' / 'rrtq'), 'bench', str(base), *options, '--runs', str(out),
            '--out', str(out), '--overwrite']
     for s in settings:
         cmd += ['--set', s]
-    proc = subprocess.run(cmd, text=True, stdout=subprocess.PIPE, stderr=sys.stderr)
-    if proc.returncode not in (0, 1):
-        raise SystemExit(f'{name}: rrtq bench exited {proc.returncode}')
+    if run:
+        proc = subprocess.run(cmd, text=True, stdout=subprocess.PIPE, stderr=sys.stderr)
+        if proc.returncode not in (0, 1):
+            raise SystemExit(f'{name}: rrtq bench exited {proc.returncode}')
+    elif not (out / 'sweep.json').exists():
+        raise SystemExit(f'{name}: no earlier table in {out}')
     command = 'rrtq ' + ' '.join(cmd[1:]).replace(str(ROOT) + '/', '')
     return json.loads((out / 'sweep.json').read_text()), command
 
 
 def bench_row(name: str, base: pathlib.Path, runs: pathlib.Path, options: list[str],
-              settings: list[str]) -> dict:
+              settings: list[str], run: bool = True) -> dict:
     """One table row run as one ``rrtq bench`` of ``base`` in ``runs/<name>``.
 
     Returns the row's name, its command, the stats and runs of its one configuration and its
@@ -57,9 +60,9 @@ def bench_row(name: str, base: pathlib.Path, runs: pathlib.Path, options: list[s
     """
     out = runs / name.replace(' ', '_').replace(',', '').replace('+', 'and')
     started = time.monotonic()
-    table, command = rrtq_bench(name, base, out, options, settings)
+    table, command = rrtq_bench(name, base, out, options, settings, run=run)
     conf = table['configurations'][0]
-    return {'name': name, 'command': command,
+    return {'name': name, 'command': command, 'machine': table.get('machine') or {},
             'stats': conf['stats'], 'runs': conf['runs'], 'wall_s': time.monotonic() - started}
 
 
@@ -108,19 +111,57 @@ def rows_benchmark(name: str, description: str, rows: dict[str, tuple[str, list[
     ap.add_argument('--rows', nargs='+', choices=sorted(rows), default=list(rows))
     ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / name)
     ap.add_argument('--no-save', action='store_true')
+    ap.add_argument('--keep-others', action='store_true',
+                    help='keep the saved rows not given with --rows (each says when and at '
+                    'which commit it was measured)')
+    ap.add_argument('--tabulate', action='store_true',
+                    help='read the rows from the tables an earlier run left in --runs '
+                    'instead of running them')
     args = ap.parse_args()
+    measured = {k: machine(ROOT)[k] for k in ('date', 'commit')}
     done = []
     for row_name in args.rows:
         label, row_settings = rows[row_name]
         print(f'{name}: {row_name} ({label})', file=sys.stderr, flush=True)
         row = bench_row(row_name, base, args.runs, ['--seeds', str(args.seeds), '--engine',
                                                     args.engine, '--workers', str(args.workers)],
-                        [*settings, *row_settings])
+                        [*settings, *row_settings], run=not args.tabulate)
         row['label'] = label
+        row['measured'] = ({k: row['machine'].get(k) for k in ('date', 'commit')}
+                           if args.tabulate else measured)
         done.append(row)
-    table = render(done)
+    if args.keep_others:
+        done = kept_rows(name, list(rows), done)
+    table = render(done) + measured_lines(done)
     if args.no_save:
         print(table)
     else:
         save(name, {'seeds': args.seeds, 'rows': done}, table)
     return 0
+
+
+def kept_rows(name: str, order: list[str], new: list[dict]) -> list[dict]:
+    """The rows of the saved ``results/<name>.json`` with ``new`` in place of their namesakes.
+
+    In the benchmark's row order; a kept row without a measurement of its own was measured
+    when its file says.
+    """
+    path = RESULTS / f'{name}.json'
+    if not path.exists():
+        return new
+    saved = json.loads(path.read_text())
+    when = {k: saved.get('machine', {}).get(k) for k in ('date', 'commit')}
+    rows = {r['name']: {**r, 'measured': r.get('measured') or when} for r in saved['rows']}
+    rows.update({r['name']: r for r in new})
+    return [rows[n] for n in order if n in rows]
+
+
+def measured_lines(rows: list[dict]) -> str:
+    """Under a table whose rows were measured at different times: when each was."""
+    stamps = {(r.get('measured') or {}).get('commit') for r in rows}
+    if len(stamps) <= 1:
+        return ''
+    lines = ['', '', 'Measured (rows re-run since the rest):', '']
+    lines += [f"- {r['label']}: {r['measured'].get('date')}, commit {r['measured'].get('commit')}"
+              for r in rows]
+    return '\n'.join(lines)
