@@ -185,6 +185,7 @@ class PolicyIteration(WeightReadout):
         held = partial(held_below, self.time_basis.batch, tau_low=tau_low, horizon=c.horizon)
         greedy_a = held(-self._greedy('u').T)
         greedy_d = held(self.gamma ** -2 * self._greedy('d').T) if self.robust else Wd
+        greedy_a = self._held_where_away(greedy_a, tau_low)
         Z = (self.time_basis.batch(tau0)[:, :, None] * x0[:, None, :]).reshape(len(x0), -1)
         # the floor of the trust region: the probing scale or the forces applied so far,
         # over the size of the states they were applied in (N per state unit)
@@ -221,6 +222,28 @@ class PolicyIteration(WeightReadout):
                 return
             s *= 0.5
         self._note(PolicyEvent.REJECTED, f'proposal (step {2 * s:.3g}): {why}')
+
+    def _held_where_away(self, W: Array, tau_low: float) -> Array:
+        """The critic's greedy gain, held where flown through the model it carries a robot away.
+
+        Where its rollout from rest (:func:`rollout.carries_away`) ends farther from the target
+        than standing still by more than ρ, the gain below the start of that rollout is held
+        at its value there (:func:`guard.held_below`: the gain of a longer horizon), up to three
+        times; as the coverage hold does where the data say nothing, here where the critic's
+        low times to go are biased (odometry noise and a delay). W unchanged without a model.
+        """
+        c = self.config
+        if not c.rollout_test or self.observer is None or self.observer.model is None:
+            return W
+        model = self.observer.model
+        starts = np.linspace(c.horizon, c.dt, 8)
+        for _ in range(3):
+            away = carries_away(model, partial(self.gain, Wa=W), c.horizon, c.dt, starts)
+            if away.excess <= c.rho or away.start <= tau_low:
+                break
+            tau_low = away.start
+            W = held_below(self.time_basis.batch, W, tau_low, c.horizon)
+        return W
 
     def _carries_away(self, Wa: Array) -> AwayFrom | None:
         """Where a proposal carries a robot at rest away, beyond what the guard tolerates.

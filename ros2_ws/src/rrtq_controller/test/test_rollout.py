@@ -120,3 +120,26 @@ def test_the_guard_rejects_a_proposal_that_carries_the_robot_away(on):
         # proposal is no worse and passes
         ctrl._target = (weights_of(ctrl, flipped), ctrl._target[1])
         assert ctrl._carries_away(weights_of(ctrl, flipped)) is None
+
+
+def test_a_greedy_gain_that_carries_the_robot_away_is_held_where_it_starts_to():
+    # The critic's greedy gain with the flip below 5 s to go: held at its value above the
+    # flip it carries no robot away, and where it did not misbehave it is unchanged.
+    from rrtq_controller.config import ControllerConfig
+    from rrtq_controller.q_learning import QLearningController
+    ctrl = QLearningController(ControllerConfig(), 4, 2, 0, np.random.default_rng(0))
+    ctrl.observer.model = model(2)
+    optimum = riccati_gain()
+
+    def flipped(tau):
+        K = optimum(tau).copy()
+        K[1, 1] *= np.clip((tau - 5.0) / 2.0, -2.0, 1.0)
+        return K
+    W = weights_of(ctrl, flipped)
+    before = carries_away(model(2), lambda t: ctrl.gain(t, W), T, DT, STARTS)
+    held = ctrl._held_where_away(W, 0.0)
+    after = carries_away(model(2), lambda t: ctrl.gain(t, held), T, DT, STARTS)
+    assert before.excess > 1.0 and after.excess < 0.2 * before.excess, (before, after)
+    assert np.allclose(ctrl.gain(T, held), ctrl.gain(T, W), atol=0.2 * np.abs(optimum(T)).max())   # a refit
+    riccati = weights_of(ctrl, optimum)
+    assert np.array_equal(ctrl._held_where_away(riccati, 0.0), riccati)   # nothing to hold
