@@ -90,10 +90,15 @@ def worst_growth(transitions: Array, positions: int, start: int) -> Array:
     X = np.zeros((size, positions))
     X[:positions, :positions] = np.eye(positions)
     blocks = np.empty((len(transitions) - start, positions, positions))
-    for i, T in enumerate(transitions[start:]):
-        X = T @ X
-        blocks[i] = X[:positions]
-    return np.asarray(np.linalg.norm(blocks, 2, axis=(1, 2)), dtype=float)
+    with np.errstate(over='ignore', invalid='ignore'):
+        for i, T in enumerate(transitions[start:]):
+            X = T @ X
+            blocks[i] = X[:positions]
+    # a loop (or an identified model) that grows without bound overflows: infinite growth
+    out = np.full(len(blocks), np.inf)
+    finite = np.isfinite(blocks).all(axis=(1, 2))
+    out[finite] = np.linalg.norm(blocks[finite], 2, axis=(1, 2))
+    return out
 
 
 def carries_away(model: OneStepModel, gain: Callable[[float], Array], horizon: float,
@@ -116,9 +121,13 @@ def carries_away(model: OneStepModel, gain: Callable[[float], Array], horizon: f
         start = min(max(int(round((horizon - float(start_tau)) / dt)), 0), steps - 1)
         ours = worst_growth(moved, m, start)
         base = np.maximum(worst_growth(still, m, start), 1.0)
-        k = int(np.argmax(ours / base))
-        if worst is None or ours[k] / base[k] - 1.0 > worst.excess:
+        with np.errstate(invalid='ignore'):
+            # where the model's own drift overflows too it tells nothing: no excess there
+            ratio = np.where(np.isinf(base), 1.0, ours / base)
+        k = int(np.argmax(ratio))
+        if worst is None or ratio[k] - 1.0 > worst.excess:
             worst = AwayFrom(float(taus[start]), float(taus[start] - dt * (k + 1)),
-                             float(ours[k]), float(base[k]))
+                             float(ours[k]) if np.isfinite(base[k]) else 1.0,
+                             float(base[k]) if np.isfinite(base[k]) else 1.0)
     assert worst is not None, 'no start'
     return worst

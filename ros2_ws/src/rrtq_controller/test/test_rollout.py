@@ -143,3 +143,15 @@ def test_a_greedy_gain_that_carries_the_robot_away_is_held_where_it_starts_to():
     assert np.allclose(ctrl.gain(T, held), ctrl.gain(T, W), atol=0.2 * np.abs(optimum(T)).max())   # a refit
     riccati = weights_of(ctrl, optimum)
     assert np.array_equal(ctrl._held_where_away(riccati, 0.0), riccati)   # nothing to hold
+
+
+def test_a_loop_that_overflows_is_infinite_growth_not_an_error():
+    # Seen on a field-bump run: an early identified model and a gain whose rollout overflowed
+    # made the 2-norm's SVD fail ("SVD did not converge") and ended the run as node_failed.
+    wild = OneStepModel(100.0 * np.eye(4), model(0).gammas, np.zeros(0), np.eye(4))
+    away = carries_away(wild, lambda tau: np.zeros((2, 4)), T, DT, STARTS)
+    assert away.excess == 0.0                         # the model's own drift: no evidence
+    stable = model(2)
+    blowing = carries_away(stable, lambda tau: -1e6 * np.ones((2, 4)), T, DT, STARTS)
+    assert blowing.excess > 1e100                      # rejected, whatever the tolerance
+    assert worst_growth(closed_loop(wild, np.zeros((200, 2, 4))), 2, 0)[-1] == np.inf
