@@ -33,6 +33,17 @@ def riccati_gain(stiffness: float = 0.0):
     return lambda tau: np.linalg.solve(R, B.T @ P(tau))
 
 
+def flipped_gain():
+    """The Riccati gain with the y position gain turning negative below 5 s to go."""
+    optimum = riccati_gain()
+
+    def flipped(tau):
+        K = optimum(tau).copy()
+        K[1, 1] *= np.clip((tau - 5.0) / 2.0, -2.0, 1.0)
+        return K
+    return flipped
+
+
 @pytest.mark.parametrize('delay', [0, 2])
 def test_the_riccati_policy_only_closes_the_offset(delay):
     away = carries_away(model(delay), riccati_gain(), T, DT, STARTS)
@@ -47,13 +58,7 @@ def test_no_force_is_standing_still():
 def test_a_position_gain_that_turns_negative_mid_horizon_carries_the_robot_away():
     # The pattern the critic proposed under noisy odometry and a 2-step delay: the y
     # position gain positive early in the leg, negative below 5 s to go.
-    optimum = riccati_gain()
-
-    def flipped(tau):
-        K = optimum(tau).copy()
-        K[1, 1] *= np.clip((tau - 5.0) / 2.0, -2.0, 1.0)
-        return K
-    away = carries_away(model(2), flipped, T, DT, STARTS)
+    away = carries_away(model(2), flipped_gain(), T, DT, STARTS)
     assert away.excess > 1.0, away                   # beyond twice standing still: diverged
     assert away.start < 5.0 + 2.0 and away.tau < away.start
     assert 'carries a robot at rest' in str(away)
@@ -103,12 +108,7 @@ def test_the_guard_rejects_a_proposal_that_carries_the_robot_away(on):
     assert ctrl.observer is not None
     assert ctrl._carries_away(weights_of(ctrl, riccati_gain())) is None   # no model yet
     ctrl.observer.model = model(2)
-    optimum = riccati_gain()
-
-    def flipped(tau):
-        K = optimum(tau).copy()
-        K[1, 1] *= np.clip((tau - 5.0) / 2.0, -2.0, 1.0)
-        return K
+    optimum, flipped = riccati_gain(), flipped_gain()
     W = weights_of(ctrl, optimum)
     assert np.allclose(ctrl.gain(3.0, W), optimum(3.0), atol=0.05 * np.abs(optimum(3.0)).max())
     assert ctrl._carries_away(W) is None
@@ -129,12 +129,7 @@ def test_a_greedy_gain_that_carries_the_robot_away_is_held_where_it_starts_to():
     from rrtq_controller.q_learning import QLearningController
     ctrl = QLearningController(ControllerConfig(), 4, 2, 0, np.random.default_rng(0))
     ctrl.observer.model = model(2)
-    optimum = riccati_gain()
-
-    def flipped(tau):
-        K = optimum(tau).copy()
-        K[1, 1] *= np.clip((tau - 5.0) / 2.0, -2.0, 1.0)
-        return K
+    optimum, flipped = riccati_gain(), flipped_gain()
     W = weights_of(ctrl, flipped)
     before = carries_away(model(2), lambda t: ctrl.gain(t, W), T, DT, STARTS)
     held = ctrl._held_where_away(W, 0.0)
