@@ -115,7 +115,7 @@ class RecorderNode(Node):
             self._drain(topic, DRAIN_LIMIT)
         return with_info(callback)
 
-    def _drain(self, topic: str, limit: int | None) -> int:
+    def _drain(self, topic: str, limit: int | None) -> None:
         """Write what is queued on ``topic`` without the executor (at most ``limit``)."""
         subscription = self._recorded[topic]
         count = 0
@@ -126,7 +126,6 @@ class RecorderNode(Node):
                 break
             self._write(topic, *taken)
             count += 1
-        return count
 
     def _write(self, topic: str, data: bytes, info) -> None:
         self.recorder.write(topic, data, info['received_timestamp'], info['source_timestamp'],

@@ -24,7 +24,7 @@ from .critic import Fit, LeastSquaresCritic, fit, residual
 from .guard import FALSE_ALARM, Brake, PolicyEvent, Sensing, held_below, trust_step
 from .observer import Observer
 from .readout import WeightReadout
-from .rollout import AwayFrom, carries_away
+from .rollout import AwayFrom, Rollout
 
 Array = NDArray[np.float64]
 
@@ -43,6 +43,7 @@ class PolicyIteration(WeightReadout):
 
     leg_index: int
     observer: Observer | None
+    _rollout_of: Rollout | None
     sensing: Sensing
     critic_trusted: bool
     event_counts: dict[PolicyEvent, int]
@@ -226,47 +227,53 @@ class PolicyIteration(WeightReadout):
     def _held_where_away(self, W: Array, tau_low: float) -> Array:
         """The critic's greedy gain, held where flown through the model it carries a robot away.
 
-        Where its rollout from rest (:func:`rollout.carries_away`) ends farther from the target
+        Where its rollout from rest (:meth:`rollout.Rollout.away`) ends farther from the target
         than standing still by more than ρ, the gain below the start of that rollout is held
         at its value there (:func:`guard.held_below`: the gain of a longer horizon), up to three
         times; as the coverage hold does where the data say nothing, here where the critic's
         low times to go are biased (odometry noise and a delay). W unchanged without a model.
         """
-        c = self.config
-        if not c.rollout_test or self.observer is None or self.observer.model is None:
+        rollout = self._rollout()
+        if rollout is None:
             return W
-        model = self.observer.model
-        starts = np.linspace(c.horizon, c.dt, 8)
         for _ in range(3):
-            away = carries_away(model, partial(self.gain, Wa=W), c.horizon, c.dt, starts)
-            if away.excess <= c.rho or away.start <= tau_low:
+            away = rollout.away(partial(self.gain, Wa=W))
+            if away.excess <= self.config.rho or away.start <= tau_low:
                 break
             tau_low = away.start
-            W = held_below(self.time_basis.batch, W, tau_low, c.horizon)
+            W = held_below(self.time_basis.batch, W, tau_low, self.config.horizon)
         return W
 
     def _carries_away(self, Wa: Array) -> AwayFrom | None:
         """Where a proposal carries a robot at rest away, beyond what the guard tolerates.
 
-        Through the observer's identified model (:func:`rollout.carries_away`), from eight
+        Through the observer's identified model (:class:`rollout.Rollout`), from eight
         times to go over the horizon: its relative excess over standing still may be at most
         what the divergence watch lets run (``divergence_distance`` - 1), or the current
         target's own if that is more (an escalation is stopped where it
         starts). None when it passes, without a model, or with ``rollout_test`` off.
         """
+        rollout = self._rollout()
+        if rollout is None:
+            return None
+        ours = rollout.away(partial(self.gain, Wa=Wa))
+        if (ours.excess <= self.config.divergence_distance - 1.0
+                or ours.excess <= rollout.away(partial(self.gain, Wa=self._target[0])).excess):
+            return None
+        return ours
+
+    def _rollout(self) -> Rollout | None:
+        """The rollouts of the observer's current model, built once per model.
+
+        None without a model or with ``rollout_test`` off.
+        """
         c = self.config
         if not c.rollout_test or self.observer is None or self.observer.model is None:
             return None
         model = self.observer.model
-        starts = np.linspace(c.horizon, c.dt, 8)
-
-        def away(W: Array) -> AwayFrom:
-            return carries_away(model, partial(self.gain, Wa=W), c.horizon, c.dt, starts)
-        ours = away(Wa)
-        if (ours.excess <= c.divergence_distance - 1.0
-                or ours.excess <= away(self._target[0]).excess):
-            return None
-        return ours
+        if self._rollout_of is None or self._rollout_of.model is not model:
+            self._rollout_of = Rollout(model, c.horizon, c.dt, np.linspace(c.horizon, c.dt, 8))
+        return self._rollout_of
 
     def _force_scale(self, u_applied: Array) -> float:
         """N: the probing scale, or the RMS force applied in the stored data if larger.

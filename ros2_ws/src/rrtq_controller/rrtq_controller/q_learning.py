@@ -128,6 +128,9 @@ class QLearningController(PolicyIteration):
                          if c.observes else None)
         """The one-step model the critic learns through (:mod:`observer`); None: the rows take
         the odometry and the commanded force as they are."""
+        self._rollout_of = None
+        """The guard's rollouts of the observer's current model (:mod:`rollout`), built once
+        per model."""
         self._segment = 0
         """Changes with the leg coordinates (a new leg or horizon): the observer's segments."""
         self._step_id = -1

@@ -39,6 +39,7 @@ from .observer import OneStepModel
 
 Array = NDArray[np.float64]
 
+
 @dataclass(frozen=True)
 class AwayFrom:
     """Where a policy carries a robot at rest farther than standing still would."""
@@ -101,33 +102,49 @@ def worst_growth(transitions: Array, positions: int, start: int) -> Array:
     return out
 
 
+class Rollout:
+    """The rollouts from rest of one identified model: standing still once, policies against it.
+
+    From each time to go in ``starts`` to the end of the horizon, in steps of ``dt`` (see the
+    module's docstring). Standing still depends on the model alone, so the guard builds this
+    once per model and flies every proposal through it.
+    """
+
+    def __init__(self, model: OneStepModel, horizon: float, dt: float,
+                 starts: Sequence[float] | Array) -> None:
+        self.model, self.dt = model, dt
+        self.m, n = model.gammas.shape[2], model.phi.shape[0]
+        steps = max(int(round(horizon / dt)), 1)
+        self.taus = horizon - dt * np.arange(steps)
+        self.starts = [min(max(int(round((horizon - float(t)) / dt)), 0), steps - 1)
+                       for t in starts]
+        still = closed_loop(model, np.zeros((steps, self.m, n)))
+        self._still = [np.maximum(worst_growth(still, self.m, k), 1.0) for k in self.starts]
+
+    def away(self, gain: Callable[[float], Array]) -> AwayFrom:
+        """Where the policy ``gain`` (τ -> K̂(τ), m x n) carries a robot at rest farthest away.
+
+        The start and step of the largest excess over standing still (negative where it
+        closes the offset everywhere).
+        """
+        moved = closed_loop(self.model, np.array([gain(float(t)) for t in self.taus]))
+        worst: AwayFrom | None = None
+        for start, base in zip(self.starts, self._still, strict=True):
+            ours = worst_growth(moved, self.m, start)
+            with np.errstate(invalid='ignore'):
+                # where the model's own drift overflows too it tells nothing: no excess there
+                ratio = np.where(np.isinf(base), 1.0, ours / base)
+            k = int(np.argmax(ratio))
+            if worst is None or ratio[k] - 1.0 > worst.excess:
+                tau = float(self.taus[start])
+                worst = AwayFrom(tau, tau - self.dt * (k + 1),
+                                 float(ours[k]) if np.isfinite(base[k]) else 1.0,
+                                 float(base[k]) if np.isfinite(base[k]) else 1.0)
+        assert worst is not None, 'no start'
+        return worst
+
+
 def carries_away(model: OneStepModel, gain: Callable[[float], Array], horizon: float,
                  dt: float, starts: Sequence[float] | Array) -> AwayFrom:
-    """Where the policy ``gain`` (τ -> K̂(τ), m x n) carries a robot at rest farthest away.
-
-    From each time to go in ``starts`` to the end of the horizon, in steps of ``dt``,
-    against the same model with no force (see the module's docstring): the start and step
-    of the largest excess over standing still (negative where it closes the offset
-    everywhere).
-    """
-    m, n = model.gammas.shape[2], model.phi.shape[0]
-    steps = max(int(round(horizon / dt)), 1)
-    taus = horizon - dt * np.arange(steps)
-    gains = np.array([gain(float(t)) for t in taus])
-    moved = closed_loop(model, gains)
-    still = closed_loop(model, np.zeros((steps, m, n)))
-    worst: AwayFrom | None = None
-    for start_tau in starts:
-        start = min(max(int(round((horizon - float(start_tau)) / dt)), 0), steps - 1)
-        ours = worst_growth(moved, m, start)
-        base = np.maximum(worst_growth(still, m, start), 1.0)
-        with np.errstate(invalid='ignore'):
-            # where the model's own drift overflows too it tells nothing: no excess there
-            ratio = np.where(np.isinf(base), 1.0, ours / base)
-        k = int(np.argmax(ratio))
-        if worst is None or ratio[k] - 1.0 > worst.excess:
-            worst = AwayFrom(float(taus[start]), float(taus[start] - dt * (k + 1)),
-                             float(ours[k]) if np.isfinite(base[k]) else 1.0,
-                             float(base[k]) if np.isfinite(base[k]) else 1.0)
-    assert worst is not None, 'no start'
-    return worst
+    """:meth:`Rollout.away` of ``gain`` through ``model`` (one policy, one model)."""
+    return Rollout(model, horizon, dt, starts).away(gain)
