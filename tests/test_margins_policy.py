@@ -12,7 +12,7 @@ from scipy.signal import lfilter
 
 from rrtq_controller.legs import LegSequencer
 from rrtq_planner.margins.coverage import binomial_interval
-from rrtq_planner.margins.calibration import (Calibration, read_calibration,
+from rrtq_planner.margins.calibration import (Calibration, pooled, read_calibration,
                                               write_calibration)
 from rrtq_planner.margins.learned import LearnedBoundConfig, LearnedBoundPolicy
 from rrtq_planner.margins.policy import LegInfo, MarginMode, MarginSample, RunningMaxPolicy
@@ -120,11 +120,26 @@ def test_calibration_round_trip_and_bad_files(tmp_path):
     write_calibration(good, cal.extended([0.3]))
     back = read_calibration(good)
     assert back.scores == (0.4, 0.2, 0.3) and back.source == 'rrtqx-paper seed 7'
+    # Version 2 carries learned_bound's two categories; pooling keeps every file's, in order.
+    two = cal.extended([0.3], normalized=[0.8, 1.1], prior=[0.25])
+    write_calibration(good, pooled([two, Calibration((0.5,), normalized=(0.7,))], 'bench'))
+    back = read_calibration(good)
+    assert back.scores == (0.4, 0.2, 0.3, 0.5) and back.normalized == (0.8, 1.1, 0.7)
+    assert back.prior == (0.25,) and back.source == 'bench'
+    # A version 1 file (scores only) is still read, with both categories empty.
+    old = tmp_path / 'old.json'
+    old.write_text(json.dumps({'format': 'rrtq-margin-calibration', 'version': 1,
+                               'scores': [0.1]}))
+    assert read_calibration(old) == Calibration((0.1,))
     cases = {
         'notjson': 'scores: [1, 2]',
         'list': '[0.1, 0.2]',
         'format': json.dumps({'format': 'other', 'version': 1, 'scores': []}),
-        'version': json.dumps({'format': 'rrtq-margin-calibration', 'version': 2, 'scores': []}),
+        'version': json.dumps({'format': 'rrtq-margin-calibration', 'version': 3, 'scores': []}),
+        'v1prior': json.dumps({'format': 'rrtq-margin-calibration', 'version': 1, 'scores': [],
+                               'prior': [0.1]}),
+        'badprior': json.dumps({'format': 'rrtq-margin-calibration', 'version': 2,
+                                'scores': [], 'prior': [0.1, -2.0]}),
         'key': json.dumps({'format': 'rrtq-margin-calibration', 'version': 1, 'scores': [],
                            'window': 5}),
         'negative': json.dumps({'format': 'rrtq-margin-calibration', 'version': 1,
@@ -134,7 +149,8 @@ def test_calibration_round_trip_and_bad_files(tmp_path):
                                'scores': 0.5}),
     }
     expect = {'notjson': 'not a JSON', 'list': 'JSON object', 'format': 'format',
-              'version': 'version 2', 'key': "'window'", 'negative': '-1.0', 'nan': 'nan',
+              'version': 'version 3', 'v1prior': "'prior'", 'badprior': 'prior: a score',
+              'key': "'window'", 'negative': '-1.0', 'nan': 'nan',
               'notlist': 'list'}
     for name, text in cases.items():
         bad = tmp_path / f'{name}.json'

@@ -1,11 +1,14 @@
-"""A run's leg scores as a calibration file next to its recording (``docs/margins.md`` §3).
+"""A run's leg scores as a calibration file next to its recording (``docs/margins.md`` §3, §10).
 
 The score of a leg is its largest deviation D_rob from its straight edge; /safety/status
-carries the current leg's largest deviation so far (``leg_deviation``) and the count of
-legs measured (``legs``), so the scores are read off the recording: the last
-``leg_deviation`` of each leg. A run started from a calibration (``safety.calibration``)
-writes the old scores followed by its own, as a robot carries its calibration from
-mission to mission.
+carries the current leg's largest deviation so far (``leg_deviation``), the count of legs
+measured (``legs``) and, under ``learned_bound``, the tube predicted for the leg at its
+start (``leg_tube``, 0 for a leg without a model), so the scores are read off the
+recording: the last ``leg_deviation`` of each leg, and learned_bound's two categories
+(deviation / tube where there was a tube, the raw deviation where there was none). A run
+started from a calibration (``safety.calibration``) writes the old scores followed by its
+own, as a robot carries its calibration from mission to mission; ``rrtq bench`` pools its
+runs' own scores (:func:`recorded_calibration`) into one file.
 """
 
 from __future__ import annotations
@@ -20,22 +23,35 @@ from rrtq_bringup.scenario import Scenario
 from rrtq_common import topics
 from rrtq_planner.margins.calibration import Calibration, read_calibration, write_calibration
 
-__all__ = ['CALIBRATION_FILE', 'recorded_scores', 'write_run_calibration']
+__all__ = ['CALIBRATION_FILE', 'recorded_scores', 'recorded_calibration',
+           'write_run_calibration']
 
 CALIBRATION_FILE = 'calibration.json'
 
 
 def recorded_scores(recording: str | pathlib.Path) -> list[float]:
     """The leg scores (m, oldest first) of a recording's /safety/status."""
+    return list(recorded_calibration(recording).scores)
+
+
+def recorded_calibration(recording: str | pathlib.Path, source: str = '',
+                         created: str = '') -> Calibration:
+    """The run's own scores: raw, and learned_bound's normalized and prior categories."""
     factory = DecoderFactory()
-    last: dict[int, float] = {}
+    last: dict[int, tuple[float, float]] = {}
+    learned = False
     with open(recording, 'rb') as f:
         for schema, channel, raw in make_reader(f).iter_messages(topics=[topics.SAFETY_STATUS],
                                                                  log_time_order=True):
             msg = factory.decoder_for(channel.message_encoding, schema)(raw.data)
             if msg.legs > 0:
-                last[int(msg.legs)] = float(msg.leg_deviation)
-    return [last[k] for k in sorted(last)]
+                last[int(msg.legs)] = (float(msg.leg_deviation), float(msg.leg_tube))
+                learned |= msg.margin_mode == 'learned_bound'
+    legs = [last[k] for k in sorted(last)]
+    normalized = [d / tube for d, tube in legs if tube > 0.0] if learned else []
+    prior = [d for d, tube in legs if tube <= 0.0] if learned else []
+    return Calibration(tuple(d for d, _ in legs), source, created, tuple(normalized),
+                       tuple(prior))
 
 
 def write_run_calibration(scenario: Scenario, recording: pathlib.Path) -> pathlib.Path:
@@ -44,6 +60,7 @@ def write_run_calibration(scenario: Scenario, recording: pathlib.Path) -> pathli
             else Calibration(()))
     created = datetime.datetime.now(datetime.UTC).strftime('%Y-%m-%dT%H:%M:%SZ')
     out = recording.parent / CALIBRATION_FILE
-    write_calibration(out, base.extended(recorded_scores(recording),
-                                         f'{scenario.name} seed {scenario.seed}', created))
+    own = recorded_calibration(recording)
+    write_calibration(out, base.extended(own.scores, f'{scenario.name} seed {scenario.seed}',
+                                         created, own.normalized, own.prior))
     return out

@@ -215,6 +215,7 @@ ERRORS = [
     ({'safety': [1]}, 'safety', 'mapping'),
     ({'safety': {'calibration': 'scores.json'}}, 'safety.calibration', 'only for margin: conformal'),
     ({'safety': {'margin': 'conformal', 'calibration': 'nope.json'}}, 'safety.calibration', 'cannot read'),
+    ({'safety': {'margin': 'learned_bound', 'conformal': 'yes'}}, 'safety.conformal', ''),
     ({'disturbance': {'model': 'field'}}, 'disturbance.bumps', 'non-empty list'),
     ({'disturbance': {'model': 'field', 'bumps': [{'center': [0, 0], 'value': [1, 0]}]}},
      'disturbance.bumps[0].radius', 'required'),
@@ -372,9 +373,10 @@ def test_safety_section_defaults_and_a_calibration_read_from_the_scenario_direct
     sc = parse()
     assert sc.margins.margin is MarginMode.RUNNING_MAX and sc.margins.confidence == 0.95
     assert sc.margins.window == 50 and sc.margins.initial_margin is None
-    assert sc.margins.prior_bound == 0.1
-    sc = parse(safety={'margin': 'learned_bound', 'prior_bound': 0.1})
+    assert sc.margins.prior_bound == 0.1 and sc.margins.conformal is True
+    sc = parse(safety={'margin': 'learned_bound', 'prior_bound': 0.1, 'conformal': False})
     assert sc.margins.margin is MarginMode.LEARNED_BOUND and sc.margins.prior_bound == 0.1
+    assert sc.margins.conformal is False
     write_calibration(tmp_path / 'scores.json', Calibration((0.2, 0.4)))
     data = copy.deepcopy(BASE) | {'safety': {'margin': 'conformal', 'confidence': 0.9,
                                              'window': 20, 'initial_margin': 0.3,
@@ -383,6 +385,9 @@ def test_safety_section_defaults_and_a_calibration_read_from_the_scenario_direct
     assert sc.margins.margin is MarginMode.CONFORMAL and sc.margins.window == 20
     assert sc.margins.calibration == str(tmp_path / 'scores.json')
     assert (sc.margins.confidence, sc.margins.initial_margin) == (0.9, 0.3)
+    # learned_bound takes a calibration too (its normalized and prior scores).
+    data['safety'] |= {'margin': 'learned_bound'}
+    assert parse_scenario(data, str(tmp_path / 'm.yaml')).margins.calibration is not None
 
 
 @pytest.mark.parametrize(('text', 'fragment'), [

@@ -135,6 +135,7 @@ def safety_status_msg(header: Header, step: SafetyStep, margin: MarginStatus) ->
         samples=int(margin.samples), violations=int(margin.violations),
         bound_violations=int(margin.bound_violations),
         leg_deviation=float(margin.leg_deviation), legs=int(margin.legs),
+        leg_tube=float(margin.leg_tube), scale=float(margin.scale),
         obstacle_distance=float(step.obstacle_distance),
         obstacle_direction=Vector3(x=step.obstacle_direction[0], y=step.obstacle_direction[1]),
         ahead_distance=float(step.ahead_distance),

@@ -51,14 +51,15 @@ class SafetyNode(Node):
         self.dims = declare_config(self, Dimensions)
         config = declare_config(self, SafetyConfig)
         margins = declare_config(self, MarginConfig)
-        calibration = read_calibration(margins.calibration).scores if margins.calibration else ()
+        calibration = read_calibration(margins.calibration) if margins.calibration else ()
         self.needs_gain = margins.margin is MarginMode.LEARNED_BOUND
         self.policy = make_policy(
             margins.margin, region=config.region, dt=run.dt,
             confidence=margins.confidence, window=margins.window,
             initial_margin=margins.initial_margin, calibration=calibration,
             frame=margins.frame, n=self.dims.n, m=self.dims.m,
-            prior_bound=margins.prior_bound, robot_radius=config.robot_radius)
+            prior_bound=margins.prior_bound, robot_radius=config.robot_radius,
+            conformal=margins.conformal)
         self.monitor = SafetyMonitor(config)
         self.aug_pub = self.create_publisher(ObstacleArray, topics.OBSTACLES_AUGMENTED,
                                              qos.LATCHED)

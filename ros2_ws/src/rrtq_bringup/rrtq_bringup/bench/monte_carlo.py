@@ -13,7 +13,10 @@ runs, successes and the time left; Ctrl-C or SIGTERM interrupts the runs in flig
 
 The table (:mod:`rrtq_bringup.bench.table`) goes to ``OUT/monte_carlo.md`` and
 ``OUT/monte_carlo.json``; a sweep writes ``OUT/sweep.md``, ``.json`` and ``.png``
-(:mod:`rrtq_bringup.bench.sweep_table`), a row per configuration.  Exit code 0 when
+(:mod:`rrtq_bringup.bench.sweep_table`), a row per configuration.  The completed runs' own
+leg scores are pooled into one calibration file beside the table, ``OUT/calibration.json``
+(a sweep: ``OUT/calibration-cfg-NN.json`` per configuration), which a later scenario
+starts from (``safety.calibration``; docs/margins.md §10).  Exit code 0 when
 every run completed, whatever its mission outcome; 1 when a run crashed, timed out
 or failed on the engine; 2 on bad input (nothing started); 130 when interrupted.
 """
@@ -44,8 +47,10 @@ from rrtq_bringup.bench.sweep import SweepError, apply, configurations, label, p
 from rrtq_bringup.bench.sweep_table import sweep_markdown, sweep_plot
 from rrtq_bringup.bench.table import COMPLETED, aggregate, machine, markdown
 from rrtq_bringup.orchestrator import BadInput, check_supported
+from rrtq_bringup.run_calibration import recorded_calibration
 from rrtq_bringup.scenario import Scenario, ScenarioError, load_scenario, parse_scenario
 from rrtq_controller.config import Variant
+from rrtq_planner.margins.calibration import pooled, write_calibration
 
 EXIT_OK, EXIT_INCOMPLETE, EXIT_BAD_INPUT, EXIT_INTERRUPTED = 0, 1, 2, 130
 ROOT = pathlib.Path(os.environ.get('RRTQ_ROOT', pathlib.Path(__file__).resolve().parents[5]))
@@ -197,6 +202,21 @@ def _run_rows(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
+def _pool_calibration(rows: list[dict[str, Any]], path: pathlib.Path, what: str) -> str | None:
+    """Pool the completed runs' own leg scores into the calibration file ``path``."""
+    runs = [r for r in rows if r['status'] == COMPLETED
+            and (pathlib.Path(r['dir']) / 'run.mcap').exists()]
+    if not runs:
+        return None
+    created = time.strftime('%Y-%m-%dT%H:%M:%SZ', time.gmtime())
+    seeds = sorted(r['seed'] for r in runs)
+    calibration = pooled((recorded_calibration(pathlib.Path(r['dir']) / 'run.mcap')
+                          for r in runs),
+                         f'rrtq bench: {what}, seeds {", ".join(map(str, seeds))}', created)
+    write_calibration(path, calibration)
+    return str(path)
+
+
 def _layout_text(config: LayoutConfig, base: Scenario) -> str:
     known = int(config.obstacles * config.known_fraction)
     return (f'Base scenario `{base.path}` ({base.name}); per seed {config.obstacles} random '
@@ -267,6 +287,13 @@ def main(argv: list[str] | None = None) -> int:
         'interrupted': scheduler.stop,
     }
     out.mkdir(parents=True, exist_ok=True)
+    for c in confs:
+        name = f'calibration-cfg-{c.index:02d}.json' if sweep else 'calibration.json'
+        what = f'{base.name} --set {c.label}' if sweep else base.name
+        path = _pool_calibration([r for r in rows if r['config'] == c.index], out / name, what)
+        if path is not None:
+            print(f'rrtq bench: leg scores pooled in {path} (a later run\'s '
+                  'safety.calibration)', file=sys.stderr)
     if sweep:
         table['settings'] = args.settings
         table['configurations'] = [

@@ -43,7 +43,7 @@ _NOISE_KEYS = {'position': 'position_std', 'velocity': 'velocity_std'}
 _DIST_KEYS = ('model', 'F', 'amplitude', 'frequency', 'gamma', 'bumps')
 _BUMP_KEYS = ('center', 'radius', 'value')
 _SAFETY_KEYS = ('margin', 'confidence', 'window', 'initial_margin', 'calibration',
-                'prior_bound')
+                'prior_bound', 'conformal')
 _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
@@ -207,8 +207,9 @@ def read_safety(r: Reader, raw: Any, base: str, plant: PlantConfig) -> MarginCon
     mode = _choice(r, data, 'margin', MarginConfig, key)
     calibration = None
     if data.get('calibration') is not None:
-        if mode is not MarginMode.CONFORMAL:
-            raise r.error('safety.calibration', f'only for margin: conformal, not {mode}')
+        if mode is MarginMode.RUNNING_MAX:
+            raise r.error('safety.calibration', 'only for margin: conformal or learned_bound, '
+                          f'not {mode}')
         file = r.string(data['calibration'], 'safety.calibration')
         path = os.path.abspath(os.path.join(base, os.path.expanduser(file)))
         try:
@@ -218,6 +219,9 @@ def read_safety(r: Reader, raw: Any, base: str, plant: PlantConfig) -> MarginCon
         calibration = path
     values = {name: r.setting(data, name, MarginConfig, key)
               for name in ('confidence', 'window', 'initial_margin', 'prior_bound')}
+    values['conformal'] = r.boolean(data.get('conformal', field_default(MarginConfig,
+                                                                        'conformal')),
+                                    'safety.conformal')
     return MarginConfig(margin=mode, calibration=calibration,
                         frame=ModelFrame(plant.spring_anchor.value), **values)
 

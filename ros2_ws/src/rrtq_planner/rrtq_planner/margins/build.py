@@ -7,7 +7,8 @@ from collections.abc import Sequence
 
 from rrtq_common.settings import check, setting
 
-from .conformal import ConformalConfig
+from .calibration import Calibration
+from .conformal import CalibratedScale, ConformalConfig
 from .learned import LearnedBoundPolicy
 from .learned_data import Bounds, LearnedBoundConfig, ModelFrame
 from .policy import ConformalPolicy, MarginMode, MarginPolicy, RunningMaxPolicy
@@ -29,7 +30,12 @@ class MarginConfig:
                                            doc='margin while the evidence certifies none; '
                                            'unset: the running max of D_rob')
     calibration: str | None = setting(None, doc='calibration file of earlier runs '
-                                      '(absolute path; conformal: its scores fill the window)')
+                                      '(absolute path; conformal: its scores fill the window; '
+                                      'learned_bound: its normalized and prior scores calibrate '
+                                      'the scale and the first legs)')
+    conformal: bool = setting(True, doc='learned_bound: calibrate the scale of the tube '
+                              'conformally (docs/margins.md section 10); false: the '
+                              'uncalibrated bound')
     frame: ModelFrame = setting(ModelFrame.LEG_TARGET, doc='learned_bound: the one-step '
                                 "model's frame (plant.spring_anchor)")
     prior_bound: float = setting(0.1, unit='m/s^2', low=0.0, low_open=True,
@@ -42,10 +48,11 @@ class MarginConfig:
 
 def make_policy(mode: MarginMode | str, *, region: Bounds | None, dt: float,
                 confidence: float = 0.95, window: int = 50,
-                initial_margin: float | None = None, calibration: Sequence[float] = (),
+                initial_margin: float | None = None,
+                calibration: Calibration | Sequence[float] = (),
                 frame: ModelFrame | str = ModelFrame.LEG_TARGET,
                 n: int = 4, m: int = 2, prior_bound: float = 0.1,
-                robot_radius: float = 0.5) -> MarginPolicy:
+                robot_radius: float = 0.5, conformal: bool = True) -> MarginPolicy:
     """The margin policy of ``mode``.
 
     Parameters
@@ -58,23 +65,32 @@ def make_policy(mode: MarginMode | str, *, region: Bounds | None, dt: float,
     dt
         The loop's step, s.
     confidence, window, initial_margin, calibration
-        The ``safety:`` keys (1 − δ; legs kept; m, None: the running max; earlier scores).
+        The ``safety:`` keys (1 − δ; legs kept; m, None: the running max; earlier runs'
+        scores: a :class:`.calibration.Calibration`, or the raw scores alone).
     frame
         learned_bound: ``plant.spring_anchor``.
     prior_bound, robot_radius
         learned_bound: R (m/s²), the field assumed possible where the data say nothing; the
         robot's radius (m), for which obstacles the current leg's margin applies to.
+    conformal
+        learned_bound: calibrate the tube's scale (``safety.conformal``).
     """
     mode = MarginMode(mode)
+    if not isinstance(calibration, Calibration):
+        calibration = Calibration(tuple(calibration))
     if mode is MarginMode.RUNNING_MAX:
         return RunningMaxPolicy()
     if mode is MarginMode.CONFORMAL:
         return ConformalPolicy(ConformalConfig(confidence=confidence, window=window),
-                               initial_margin, calibration)
+                               initial_margin, calibration.scores)
     if region is None:
         raise ValueError('learned_bound needs the region (the scenario\'s bounds)')
     return LearnedBoundPolicy(LearnedBoundConfig(region=region, dt=dt, frame=ModelFrame(frame),
                                                  confidence=confidence, window=window,
                                                  prior_bound=prior_bound,
                                                  robot_radius=robot_radius),
-                              n, m, initial_margin)
+                              n, m, initial_margin,
+                              CalibratedScale(ConformalConfig(confidence=confidence,
+                                                              window=window),
+                                              calibration.normalized, calibration.prior)
+                              if conformal else None)

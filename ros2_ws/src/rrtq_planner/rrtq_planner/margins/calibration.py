@@ -1,16 +1,23 @@
-"""Calibration files: the leg scores a run carries to the next (``docs/margins.md`` §2).
+"""Calibration files: the leg scores a run carries to the next (``docs/margins.md`` §3, §10).
 
 One mission has 15-35 legs while the conformal quantile at δ = 0.05 needs 19 scores, so a
-run writes its scores next to its recording and a later run starts from them, as a robot
-carries its calibration from mission to mission. The file is JSON::
+run writes its scores next to its recording, ``rrtq bench`` pools its runs' into one file,
+and a later run starts from it, as a robot carries its calibration from mission to mission.
+The file is JSON::
 
-    {"format": "rrtq-margin-calibration", "version": 1,
+    {"format": "rrtq-margin-calibration", "version": 2,
      "scores": [0.41, 0.37, ...],        # m, largest deviation of each leg, oldest first
-     "source": "rrtqx-paper seed 7",      # free text: where the scores come from
-     "created": "2026-12-01T17:27:00Z"}   # free text, given by the writer
+     "normalized": [0.62, 0.18, ...],    # learned_bound: deviation / predicted tube of each
+                                         # leg that had a contracting model at its start
+     "prior": [0.35, ...],               # learned_bound: m, deviation of each leg without one
+     "source": "rrtqx-paper seed 7",     # free text: where the scores come from
+     "created": "2026-12-01T17:27:00Z"}  # free text, given by the writer
 
-Unknown keys are an error (a newer writer's file is not silently half-read); a later
-version changes ``version``.
+``scores`` is what ``conformal`` calibrates on; ``normalized`` and ``prior`` are
+``learned_bound``'s two Mondrian categories (the legs with a model, scored against their
+tube; the first legs, before the model contracts, scored raw). Version 1 files (``scores``
+only) are read with both empty. Unknown keys are an error (a newer writer's file is not
+silently half-read); a later version changes ``version``.
 """
 
 from __future__ import annotations
@@ -21,11 +28,12 @@ import math
 import pathlib
 from collections.abc import Iterable
 
-__all__ = ['FORMAT', 'VERSION', 'Calibration', 'read_calibration', 'write_calibration']
+__all__ = ['FORMAT', 'VERSION', 'Calibration', 'read_calibration', 'write_calibration',
+           'pooled']
 
 FORMAT = 'rrtq-margin-calibration'
-VERSION = 1
-_KEYS = {'format', 'version', 'scores', 'source', 'created'}
+VERSION = 2
+_KEYS = {'format', 'version', 'scores', 'normalized', 'prior', 'source', 'created'}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,22 +44,41 @@ class Calibration:
     """m: each leg's largest deviation D_rob from its straight edge."""
     source: str = ''
     created: str = ''
+    normalized: tuple[float, ...] = ()
+    """learned_bound: each leg's largest deviation over the tube predicted for it at its start
+    (legs that started with a contracting model)."""
+    prior: tuple[float, ...] = ()
+    """learned_bound, m: the largest deviation of each leg that started without one."""
 
     def __post_init__(self) -> None:
-        for s in self.scores:
-            if not (isinstance(s, (int, float)) and not isinstance(s, bool)
-                    and math.isfinite(s) and s >= 0.0):
-                raise ValueError(f'a score must be a finite number >= 0, got {s!r}')
+        for key in ('scores', 'normalized', 'prior'):
+            for s in getattr(self, key):
+                if not (isinstance(s, (int, float)) and not isinstance(s, bool)
+                        and math.isfinite(s) and s >= 0.0):
+                    raise ValueError(f'{key}: a score must be a finite number >= 0, got {s!r}')
 
-    def extended(self, scores: Iterable[float], source: str = '', created: str = '') -> Calibration:
+    def extended(self, scores: Iterable[float], source: str = '', created: str = '',
+                 normalized: Iterable[float] = (), prior: Iterable[float] = ()) -> Calibration:
         """These scores followed by a newer run's (what that run writes)."""
         return Calibration(self.scores + tuple(float(s) for s in scores),
-                           source or self.source, created or self.created)
+                           source or self.source, created or self.created,
+                           self.normalized + tuple(float(s) for s in normalized),
+                           self.prior + tuple(float(s) for s in prior))
+
+
+def pooled(calibrations: Iterable[Calibration], source: str = '',
+           created: str = '') -> Calibration:
+    """One calibration holding every given one's scores, in the given order."""
+    out = Calibration((), source, created)
+    for c in calibrations:
+        out = out.extended(c.scores, source, created, c.normalized, c.prior)
+    return out
 
 
 def write_calibration(path: str | pathlib.Path, calibration: Calibration) -> None:
     """Write ``calibration`` to ``path`` (JSON, version :data:`VERSION`)."""
     data = {'format': FORMAT, 'version': VERSION, 'scores': list(calibration.scores),
+            'normalized': list(calibration.normalized), 'prior': list(calibration.prior),
             'source': calibration.source, 'created': calibration.created}
     pathlib.Path(path).write_text(json.dumps(data, indent=1) + '\n')
 
@@ -69,19 +96,26 @@ def read_calibration(path: str | pathlib.Path) -> Calibration:
         raise ValueError(f'{p}: a calibration file is a JSON object, got {type(data).__name__}')
     if data.get('format') != FORMAT:
         raise ValueError(f'{p}: format must be {FORMAT!r}, got {data.get("format")!r}')
-    if data.get('version') != VERSION:
+    if data.get('version') not in (1, VERSION):
         raise ValueError(f'{p}: version {data.get("version")!r} is not supported '
                          f'(this reader knows version {VERSION})')
     unknown = sorted(set(data) - _KEYS)
     if unknown:
         raise ValueError(f'{p}: unknown key {unknown[0]!r}')
-    scores = data.get('scores')
-    if not isinstance(scores, list):
-        raise ValueError(f'{p}: scores must be a list of numbers (m)')
+    if data['version'] == 1 and {'normalized', 'prior'} & set(data):
+        raise ValueError(f'{p}: unknown key {sorted({"normalized", "prior"} & set(data))[0]!r} '
+                         'in a version 1 file')
+    lists = {}
+    for key in ('scores', 'normalized', 'prior'):
+        value = data.get(key, [] if key != 'scores' else None)
+        if not isinstance(value, list):
+            raise ValueError(f'{p}: {key} must be a list of numbers')
+        lists[key] = tuple(value)
     for key in ('source', 'created'):
         if not isinstance(data.get(key, ''), str):
             raise ValueError(f'{p}: {key} must be a string')
     try:
-        return Calibration(tuple(scores), data.get('source', ''), data.get('created', ''))
+        return Calibration(lists['scores'], data.get('source', ''), data.get('created', ''),
+                           lists['normalized'], lists['prior'])
     except ValueError as exc:
-        raise ValueError(f'{p}: scores: {exc}') from exc
+        raise ValueError(f'{p}: {exc}') from exc

@@ -25,8 +25,8 @@ import numpy.typing as npt
 
 from rrtq_common.settings import check, setting
 
-__all__ = ['ConformalConfig', 'ConformalQuantile', 'conformal_rank', 'conformal_quantile',
-           'minimum_scores', 'aci_miss_rate_bound']
+__all__ = ['ConformalConfig', 'ConformalQuantile', 'CalibratedScale', 'conformal_rank',
+           'conformal_quantile', 'minimum_scores', 'aci_miss_rate_bound']
 
 
 def conformal_rank(n: int, delta: float) -> int:
@@ -135,3 +135,53 @@ class ConformalQuantile:
             self.delta_t += self.config.adaptation * (self.config.delta - miss)
         self.scores.append(float(score))
         return miss
+
+
+class CalibratedScale:
+    """``learned_bound``'s conformal calibration: two Mondrian categories (docs/margins.md §10).
+
+    A leg that starts with a contracting model is scored by its largest deviation over the
+    tube ``learned_bound`` predicted for it at its start (normalized, locally adaptive
+    conformal scores: Papadopoulos et al. 2008, Lei et al. 2018 §5.2); its margin is that
+    tube times the conformal quantile of the scores, the *scale*. A leg that starts without
+    one (a mission's first legs) has no tube: it is scored raw, in m, and its margin is the
+    conformal quantile of those. Each category has its own window and adaptive level δ_t
+    (Mondrian conformal prediction, Vovk et al. 2005 §4.5: the guarantee holds within each
+    category, so over all legs too).
+
+    Parameters
+    ----------
+    config
+        Confidence, window (legs of this run kept beside the calibration), adaptation.
+    normalized, prior
+        The two categories' scores of earlier runs (:mod:`.calibration`), oldest first:
+        all of them are kept, and this run's last ``window`` legs with them.
+    """
+
+    def __init__(self, config: ConformalConfig, normalized: Iterable[float] = (),
+                 prior: Iterable[float] = ()) -> None:
+        normalized, prior = list(normalized), list(prior)
+        self.model = ConformalQuantile(
+            dataclasses.replace(config, window=config.window + len(normalized)), normalized)
+        self.prior = ConformalQuantile(
+            dataclasses.replace(config, window=config.window + len(prior)), prior)
+
+    @property
+    def scale(self) -> float:
+        """The factor on the predicted tube; +inf while the scores cannot certify 1 − δ_t."""
+        return self.model.margin
+
+    @property
+    def prior_margin(self) -> float:
+        """m, the margin of a leg without a model; +inf while the scores cannot certify it."""
+        return self.prior.margin
+
+    def observe(self, deviation: float, tube: float, margin_used: float,
+                adapt: bool) -> None:
+        """Account a finished leg: its largest deviation (m), the tube predicted at its start
+        (m; 0: none, a prior leg) and the margin in force for it (m). ``adapt``: the margin
+        was this category's quantile (not the uncalibrated fallback of a warm-up)."""
+        if tube > 0.0:
+            self.model.observe(deviation / tube, margin_used / tube, adapt)
+        else:
+            self.prior.observe(deviation, margin_used, adapt)

@@ -21,6 +21,12 @@ the leg's line. Each obstacle is grown by the margin of where it is
 This module learns (the statistics, the fits, the refutations); turning the fit into the
 leg's tube and the margins is :mod:`.learned_margin`'s, and the settings and data types are
 :mod:`.learned_data`'s.
+
+With a :class:`.conformal.CalibratedScale` (``safety.conformal``, docs/margins.md §10) the
+bound is conformalized: each leg is scored by its largest deviation over the tube predicted
+at its start, and a leg's margin is that tube times the conformal quantile of the scores
+(or, for a leg that starts without a contracting model, the quantile of such legs' raw
+deviations); the margin in force for a leg never drops within it.
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ import numpy as np
 import shapely
 
 from .bank import BoundBank
+from .conformal import CalibratedScale
 from .learned_data import Bounds, FieldEstimate, LearnedBoundConfig, LegData, ModelFrame
 from .learned_margin import LearnedMargin
 from .policy import LegTracker, MarginMode, MarginSample, MarginStatus
@@ -51,13 +58,24 @@ class LearnedBoundPolicy(LearnedMargin):
         State and input dimensions.
     initial_margin
         m, the margin while the bank has no finite level; None: the running max of D_rob.
+    calibrated
+        The conformal calibration of the scale (docs/margins.md §10); None: the bound as it
+        is (``safety.conformal: false``).
     """
 
     mode = MarginMode.LEARNED_BOUND
 
     def __init__(self, config: LearnedBoundConfig, n: int = 4, m: int = 2,
-                 initial_margin: float | None = None) -> None:
+                 initial_margin: float | None = None,
+                 calibrated: CalibratedScale | None = None) -> None:
         self.config = config
+        self.calibrated = calibrated
+        self.scale = 1.0
+        """The factor on the predicted tube (1 without calibration or before it certifies)."""
+        self.leg_tube = 0.0
+        """m, the current leg's uncalibrated prediction at its start (0: no model then)."""
+        self.leg_calibrated = False
+        """Whether the current leg's margin came from a calibrated quantile (ACI adapts)."""
         self.n, self.m, self.d = n, m, n + m
         self.initial_margin = initial_margin
         self.features = RBFFeatures(config.region, config.feature_spacing)
@@ -154,6 +172,9 @@ class LearnedBoundPolicy(LearnedMargin):
         ended = self.legs.update(sample)
         if ended is not None:
             self.misses += ended > self.leg_margin
+            if self.calibrated is not None:
+                self.calibrated.observe(ended, self.leg_tube, self.leg_margin,
+                                        self.leg_calibrated)
         if self.legs.new_leg:
             if self.current is not None:
                 self.data.append(self.current)
@@ -164,6 +185,7 @@ class LearnedBoundPolicy(LearnedMargin):
             self._new_tube(sample)
             self._follow_band()
             self.model_margin = self._model_margin()
+            self._calibrate()
             self.leg_margin = self._margin()
             self.flagged = False
         elif sample.t - self.last_fit >= c.evaluation_period - 1e-9 and self.current is not None:
@@ -177,10 +199,11 @@ class LearnedBoundPolicy(LearnedMargin):
         violation = t.leg is not None and t.leg_max > self.leg_margin and not self.flagged
         self.flagged |= violation
         local = None if math.isinf(self.model_margin) else self.obstacle_margin
-        return MarginStatus(self.mode, max(self._margin(), t.leg_max), self.leg_margin,
+        return MarginStatus(self.mode, max(self._now(), t.leg_max), self.leg_margin,
                             self.bank.level * c.prior_bound, c.confidence, self.samples,
                             self.misses + self.flagged, t.d_rob, t.d_rob_max, violation,
-                            self.bank.violations, t.leg_max, t.count, local)
+                            self.bank.violations, t.leg_max, t.count, local,
+                            leg_tube=self.leg_tube, scale=self.scale)
 
     def estimate(self) -> FieldEstimate | None:
         """The last fit's field and band as accelerations on the cells; None before a fit."""

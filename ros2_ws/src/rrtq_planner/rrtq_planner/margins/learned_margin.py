@@ -18,6 +18,7 @@ import shapely
 from scipy.stats import norm
 
 from .bank import BoundBank
+from .conformal import CalibratedScale
 from .learned_data import LearnedBoundConfig, LegData, ModelFrame
 from .policy import LegTracker, MarginSample
 from .tube import (expanding, leg_spread, leg_tube_terms, nominal_deviation, nominal_path,
@@ -65,6 +66,11 @@ class LearnedMargin:
     _local: dict[tuple[str, bytes], tuple[float, np.ndarray]]
     _prior_residual: np.ndarray
     _delta: float
+    calibrated: CalibratedScale | None
+    scale: float
+    leg_tube: float
+    leg_calibrated: bool
+    leg_margin: float
 
     def _follow_band(self) -> None:
         """The field's bound step by step along the current leg, and the leg's tube with it.
@@ -237,7 +243,7 @@ class LearnedMargin:
         generic, gaps = self._local[key]
         # The bound of the leg's motion from the last anchor on (its past deviation, which
         # the status's margin keeps, is history for the obstacles).
-        now = self._margin()
+        now = self._now()
         if len(gaps) and np.any(gaps <= np.maximum(self.radius, now) + self.config.robot_radius):
             return max(generic, now)
         return generic
@@ -258,10 +264,51 @@ class LearnedMargin:
             return max(self._margin(), self.legs.leg_max)
         # No nominal part: how a future leg is entered (its start velocity against its line)
         # is known when it starts, and then its own margin grows the obstacles near it.
-        return float((level * tube + z * spread).max())
+        # Calibrated: the future leg's margin will be its tube times the same scale.
+        return self.scale * float((level * tube + z * spread).max())
 
     def _fallback(self) -> float:
         return self.legs.d_rob_max if self.initial_margin is None else self.initial_margin
 
     def _margin(self) -> float:
-        return self._fallback() if math.isinf(self.model_margin) else self.model_margin
+        if math.isinf(self.model_margin):
+            prior = self._prior_margin()
+            return self._fallback() if prior is None else prior
+        return self.scale * self.model_margin
+
+    def _now(self) -> float:
+        """The margin in force now: calibrated, never below the leg's (its scores' premise)."""
+        if self.calibrated is None:
+            return self._margin()
+        return max(self.leg_margin, self._margin())
+
+    def _prior_margin(self) -> float | None:
+        """Calibrated: m, the margin of a leg without a model (None: no calibration yet)."""
+        if self.calibrated is None:
+            return None
+        prior = self.calibrated.prior
+        q = prior.margin
+        if math.isfinite(q):
+            return q
+        if prior.warming_up:
+            return None
+        return max(prior.scores)       # δ_t pushed under 1/(n+1) by misses: all seen
+
+    def _calibrate(self) -> None:
+        """At a leg's start: the scale, the leg's tube and category (docs/margins.md §10)."""
+        if self.calibrated is None:
+            return
+        model = self.calibrated.model
+        q = model.margin
+        if math.isfinite(q):
+            self.scale = q
+        elif model.warming_up:
+            self.scale = 1.0           # no calibration yet: the bound as it is
+        else:
+            self.scale = max(1.0, max(model.scores))
+        if math.isfinite(self.model_margin):
+            self.leg_tube = self.model_margin
+            self.leg_calibrated = not model.warming_up
+        else:
+            self.leg_tube = 0.0
+            self.leg_calibrated = self._prior_margin() is not None

@@ -115,6 +115,12 @@ class MarginStatus:
     local: Callable[[str, np.ndarray], float] | None = None
     """learned_bound, once it has a bound: the margin (m) of one obstacle (id, polygon (k, 2))
     by where it is (docs/margins.md §5.1); None: every obstacle is grown by ``margin``."""
+    leg_tube: float = 0.0
+    """learned_bound: m, the tube predicted for the current leg at its start before any
+    calibration (a leg's normalized score is its deviation over this); 0 when the leg
+    started without a contracting model, or in the other modes."""
+    scale: float = 1.0
+    """learned_bound, conformal: the calibrated factor on the tube (1: uncalibrated)."""
 
 
 class MarginPolicy(Protocol):
