@@ -1,22 +1,32 @@
 #!/usr/bin/env python3
-"""Safety margins in the closed loop: running_max against learned_bound on five scenarios.
+"""Safety margins in the closed loop: the calibrated learned bound, uncalibrated, running_max.
 
-Each scenario (``scenarios/narrow_gap.yaml`` and ``benchmarks/margins_scenarios/``'s
-``defaults_gap``, ``two_bumps``, ``bump_mid``, ``heavy_gap``) is one ``rrtq bench`` with
-its own obstacles kept and no random ones, ``--set safety.margin=running_max,learned_bound``,
-8 seeds. Per scenario and mode: goals, collisions, time to goal, path over the optimum,
-replans, and the legs whose realised deviation exceeded the margin in force, from the
-recordings alone (:mod:`rrtq_bringup.margin_coverage`) with 95 % Clopper-Pearson intervals:
-over all legs, in each mission's first three legs (learned_bound's fallback, before it has a
-contracting model), after them, and the missions compatible with δ on their own.
+Five scenarios (``scenarios/narrow_gap.yaml`` and ``benchmarks/margins_scenarios/``'s
+``defaults_gap``, ``two_bumps``, ``bump_mid``, ``heavy_gap``), each with its own obstacles
+kept and no random ones, and ``layouts``: narrow_gap's field and route among the bench's 8
+random obstacles per seed. Per scenario (docs/margins.md §10):
 
-Usage: ``.venv/bin/python benchmarks/margins_closed_loop.py [--seeds 8] [--scenarios NAME ...]
-[--runs DIR]``; writes ``benchmarks/results/margins_closed_loop.{json,md}``.
+1. a calibration: ``rrtq bench --set safety.margin=learned_bound`` on seeds 100 on, which
+   pools its runs' leg scores into ``calibration-cfg-00.json``;
+2. ``learned_bound`` from that calibration (``safety.calibration``, other seeds than the
+   calibration's: 0 on), conformal (the default) and ``safety.conformal=false``;
+3. ``running_max`` on the same seeds.
+
+Per mode: goals, collisions, time to goal, path over the optimum, replans, the mean margin
+in force per leg, and the legs whose realised deviation exceeded the margin in force, from
+the recordings alone (:mod:`rrtq_bringup.margin_coverage`) with 95 % Clopper-Pearson
+intervals: over all legs, in each mission's first three legs, after them, and the missions
+compatible with δ on their own.
+
+Usage: ``.venv/bin/python benchmarks/margins_closed_loop.py [--seeds 20] [--compare-seeds 10]
+[--calibration-seeds 20] [--scenarios NAME ...] [--runs DIR]``; writes
+``benchmarks/results/margins_closed_loop.{json,md}``.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import pathlib
 import sys
@@ -31,8 +41,11 @@ SCENARIOS = {
     'two_bumps': ROOT / 'benchmarks' / 'margins_scenarios' / 'two_bumps.yaml',
     'bump_mid': ROOT / 'benchmarks' / 'margins_scenarios' / 'bump_mid.yaml',
     'heavy_gap': ROOT / 'benchmarks' / 'margins_scenarios' / 'heavy_gap.yaml',
+    'layouts': ROOT / 'scenarios' / 'narrow_gap.yaml',
 }
-MODES = 'safety.margin=running_max,learned_bound'
+OBSTACLES = {'layouts': ['--obstacles', '8']}
+"""Per scenario, how its obstacles are made (default: its own, no random ones)."""
+CALIBRATION_FIRST_SEED = 100
 EARLY_LEGS = 3
 
 
@@ -40,22 +53,25 @@ def _fmt(value: float | None) -> str:
     return '—' if value is None else f'{value:.1f}'
 
 
-def mode_row(conf: dict) -> dict:
+def mode_row(conf: dict, mode: str) -> dict:
     """One mode of one scenario: the sweep's stats and the recordings' coverage."""
     s = conf['stats']
     legs = misses = early_legs = early_misses = not_compatible = 0
+    margins: list[float] = []
     for run in conf['runs']:
         recording = pathlib.Path(run['dir']) / 'run.mcap'
         if not recording.is_file():
             continue
         cov = coverage([recording])
         legs, misses = legs + len(cov.legs), misses + cov.misses
+        margins += [leg.margin for leg in cov.legs]
         early = cov.legs[:EARLY_LEGS]
         early_legs += len(early)
         early_misses += sum(not leg.covered for leg in early)
         not_compatible += not cov.passed
     path = s['path_over_optimum']
-    return {'mode': conf['overrides']['safety.margin'], 'runs': s['completed'],
+    return {'mode': mode, 'runs': s['completed'],
+            'mean_margin': sum(margins) / len(margins) if margins else None,
             'goals': s['successes'], 'collisions': s['collisions'],
             'time': _fmt(s['time_to_goal_s']['median']),
             'path': ('—' if path['median'] is None
@@ -69,17 +85,20 @@ def mode_row(conf: dict) -> dict:
 
 def render(scenarios: dict[str, list[dict]]) -> str:
     """The table, a row per scenario and mode."""
-    lines = ['Each scenario\'s own obstacles, no random ones, default `safety:` keys but the '
-             'mode. Legs above their margin come from the recordings '
-             '(`python -m rrtq_bringup.margin_coverage`), with 95 % Clopper-Pearson intervals; '
-             '"legs 0–2" are each mission\'s first three legs (learned_bound\'s fallback: no '
-             'contracting model yet, so the running max at the leg\'s start); "missions '
-             'compatible": each recording alone, the lower end of its interval at most '
-             'δ = 0.05.', '',
+    lines = ['Each scenario\'s own obstacles, no random ones (`layouts`: narrow_gap\'s field '
+             'and route among 8 random obstacles per seed), default `safety:` keys but the '
+             'mode. `learned_bound` starts from a calibration pooled by `rrtq bench` from '
+             'other seeds of the same scenario (seeds 100 on), conformal (the default) and '
+             'not (`conformal=false`, which ignores it). Legs above their margin come from '
+             'the recordings (`python -m rrtq_bringup.margin_coverage`: the least margin '
+             'published while the leg ran), with 95 % Clopper-Pearson intervals; "legs 0–2" '
+             'are each mission\'s first three legs; "mean margin": over legs, the margin in '
+             'force; "missions compatible": each recording alone, the lower end of its '
+             'interval at most δ = 0.05.', '',
              '| scenario | mode | goals | collisions | time to goal s (median) | path / optimum '
-             '(median / p95) | replans (median) | legs above their margin [95 %] | of them in '
-             'legs 0–2 | after leg 2 [95 %] | missions compatible |',
-             '|---|---|---|---|---|---|---|---|---|---|---|']
+             '(median / p95) | replans (median) | mean margin m | legs above their margin '
+             '[95 %] | of them in legs 0–2 | after leg 2 [95 %] | missions compatible |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|']
     for name, rows in scenarios.items():
         for r in rows:
             later_legs = r['legs'] - r['early_legs']
@@ -87,6 +106,7 @@ def render(scenarios: dict[str, list[dict]]) -> str:
             lines.append(
                 f"| {name} | {r['mode']} | {r['goals']}/{r['runs']} | {r['collisions']} | "
                 f"{r['time']} | {r['path']} | {r['replans']} | "
+                f"{'—' if r.get('mean_margin') is None else format(r['mean_margin'], '.2f')} | "
                 f"{r['misses']}/{r['legs']}, {r['misses'] / max(r['legs'], 1):.3f} "
                 f"[{r['ci'][0]:.3f}, {r['ci'][1]:.3f}] | {r['early_misses']}/{r['early_legs']} | "
                 f"{later}/{later_legs}, {later / max(later_legs, 1):.3f} "
@@ -97,7 +117,12 @@ def render(scenarios: dict[str, list[dict]]) -> str:
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument('--seeds', type=int, default=8)
+    ap.add_argument('--seeds', type=int, default=20,
+                    help='seeds of the calibrated learned_bound (0 on)')
+    ap.add_argument('--compare-seeds', type=int, default=10,
+                    help='seeds of the uncalibrated learned_bound and running_max (0 on)')
+    ap.add_argument('--calibration-seeds', type=int, default=20,
+                    help=f'seeds of the calibration ({CALIBRATION_FIRST_SEED} on)')
     ap.add_argument('--workers', type=int, default=os.cpu_count() or 1)
     ap.add_argument('--scenarios', nargs='+', choices=sorted(SCENARIOS), default=list(SCENARIOS))
     ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / 'margins_closed_loop')
@@ -106,11 +131,34 @@ def main() -> int:
     scenarios, commands = {}, []
     for name in args.scenarios:
         print(f'margins_closed_loop: {name}', file=sys.stderr, flush=True)
-        table, command = rrtq_bench(name, SCENARIOS[name], args.runs / name,
-                                    ['--obstacles', '0', '--keep-obstacles', '--seeds',
-                                     str(args.seeds), '--workers', str(args.workers)], [MODES])
-        scenarios[name] = [mode_row(conf) for conf in table['configurations']]
-        commands.append(command)
+        base = SCENARIOS[name]
+        options = OBSTACLES.get(name, ['--obstacles', '0', '--keep-obstacles'])
+        runs = args.runs / name
+
+        def bench(what: str, seeds: int, first: int, settings: list[str],
+                  name: str = name, base: pathlib.Path = base, options: list[str] = options,
+                  runs: pathlib.Path = runs) -> dict:
+            table, command = rrtq_bench(f'{name} {what}', base, runs / what,
+                                        [*options, '--seeds', str(seeds), '--first-seed',
+                                         str(first), '--workers', str(args.workers)], settings)
+            commands.append(command)
+            return table
+
+        bench('calibration', args.calibration_seeds, CALIBRATION_FIRST_SEED,
+              ['safety.margin=learned_bound'])
+        calibration = (runs / 'calibration' / 'calibration-cfg-00.json').resolve()
+        pooled = json.loads(calibration.read_text())
+        print(f'margins_closed_loop: {name}: calibration of {len(pooled["normalized"])} '
+              f'normalized and {len(pooled["prior"])} prior scores', file=sys.stderr)
+        calibrated = bench('learned_bound', args.seeds, 0, [
+            'safety.margin=learned_bound', f'safety.calibration={calibration}'])
+        rows = [mode_row(calibrated['configurations'][0], 'learned_bound, calibrated')]
+        uncalibrated = bench('uncalibrated', args.compare_seeds, 0, [
+            'safety.margin=learned_bound', 'safety.conformal=false'])
+        rows.append(mode_row(uncalibrated['configurations'][0], 'learned_bound, conformal=false'))
+        running_max = bench('running_max', args.compare_seeds, 0, ['safety.margin=running_max'])
+        rows.append(mode_row(running_max['configurations'][0], 'running_max'))
+        scenarios[name] = rows
     text = render(scenarios) + '\n\nCommands:\n\n' + '\n'.join(f'- `{c}`' for c in commands)
     if args.no_save:
         print(text)

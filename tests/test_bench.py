@@ -91,6 +91,12 @@ def test_two_seeds_table_matches_the_runs(tmp_path, base):
         assert control['legs'] > 0 and control['ratio_riccati_policy_last10'] >= 0.9
         assert control['max_abs_force_n'] == pytest.approx(
             max(abs(f) for f in _commands(runs / f'seed-{seed:03d}' / 'run.mcap')))
+    # The runs' own leg scores, pooled beside the table: a later scenario's calibration.
+    pooled = json.loads((out / 'calibration.json').read_text())
+    own = [json.loads((runs / f'seed-{seed:03d}' / 'calibration.json').read_text())['scores']
+           for seed in (5, 6)]
+    assert pooled['scores'] == own[0] + own[1] and len(pooled['scores']) > 2
+    assert 'seeds 5, 6' in pooled['source'] and 'calibration.json' in proc.stderr
     assert stats['control']['runs'] == 2
     assert stats['control']['within_10pct'] == sum(
         r['control']['ratio_riccati_policy_last10'] <= 1.10 for r in table['runs'])

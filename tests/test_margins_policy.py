@@ -18,6 +18,7 @@ from rrtq_planner.margins.learned import LearnedBoundConfig, LearnedBoundPolicy
 from rrtq_planner.margins.policy import LegInfo, MarginMode, MarginSample, RunningMaxPolicy
 from rrtq_planner.margins.tube import leg_tube_terms
 from rrtq_planner.safety import Leg, SafetyConfig, SafetyMonitor
+from rrtq_testing.margin_missions import rover_mission
 from rrtq_sim.field import Bump, DisturbanceField, compose_input_matrix
 from rrtq_sim.plant import Plant, rover_matrices
 
@@ -43,48 +44,10 @@ def test_running_max_is_the_safety_monitors_margin_step_for_step():
         assert status.d_rob_max == node.d_rob_max and status.mode is MarginMode.RUNNING_MAX
 
 
-PD = np.array([[40.0, 0.0, 30.0, 0.0], [0.0, 40.0, 0.0, 30.0]])
-
-
-def _mission(policy, steps=3000, seed=0):
-    """The rover without a spring between random waypoints of a 12 m square under a PD law
-    with probing that decays leg by leg (strong on the first: the transient), through a field
-    bump. (Waypoints in varied directions: along a straight route the legs' frame moves with
-    the robot and a model-free fit cannot tell a field from a spring; see docs/margins.md.)"""
-    a_mat, b_mat = rover_matrices(40.0, 0.0, 45.0)
-    dt = 0.05
-    plant = Plant(a_mat, b_mat, compose_input_matrix(None, 4), dt, 1000.0)
-    field = DisturbanceField([Bump((6.0, 6.0), 4.0, (0.15, -0.2))])
-    rng = np.random.default_rng(seed)
-    white = rng.standard_normal((steps, 2))
-    probe = lfilter([np.sqrt(1 - 0.95**2)], [1.0, -0.95], white, axis=0)
-    route = rng.uniform(0.0, 12.0, (60, 2))
-    legs = LegSequencer(rho=0.15, horizon=10.0)
-    x = np.zeros(4)
-    legs.set_plan(route, x, 0.0)
-    rows = []
-    prev = None
-    for k in range(steps):
-        t = k * dt
-        sample = MarginSample(t, x) if prev is None else MarginSample(
-            t, x, prev['leg'], prev['u'], prev['probe'], lambda tau: PD, 10.0)
-        status = policy.step(sample)
-        rows.append((status, None if prev is None else prev['leg'].index))
-        legs.update(x, t)
-        leg = legs.leg
-        std = 60.0 * 0.6 ** leg.index
-        p = std * probe[k]
-        u = -PD @ (x - leg.target) + p
-        prev = {'leg': LegInfo(leg.index, leg.x0[:2].copy(), leg.target[:2].copy(), leg.d0),
-                'u': u, 'probe': p}
-        x = plant.step(x, u, field.acceleration(x), np.zeros(2))
-    return rows, plant, field
-
-
 def test_learned_bound_covers_the_legs_and_the_field_on_a_true_plant():
     config = LearnedBoundConfig(region=((-2.0, 14.0), (-2.0, 14.0)), dt=0.05, prior_bound=0.5)
     policy = LearnedBoundPolicy(config)
-    rows, plant, field = _mission(policy)
+    rows, plant, field = rover_mission(policy)
     status = rows[-1][0]
     legs = policy.scores
     assert len(legs) >= 12
@@ -168,7 +131,7 @@ def test_learned_bound_grows_each_obstacle_by_the_margin_of_where_it_is():
     # by their residuals, the rest of the map by the prior.
     config = LearnedBoundConfig(region=((-2.0, 40.0), (-2.0, 14.0)), dt=0.05, prior_bound=0.05)
     policy = LearnedBoundPolicy(config)
-    rows, _, field = _mission(policy, steps=2000)
+    rows, _, field = rover_mission(policy, steps=2000)
     status = rows[-1][0]
     assert status.local is not None
     # The bump's centre, where the field is five times the prior, is refuted. (So are some
@@ -195,7 +158,7 @@ def test_learned_bound_grows_each_obstacle_by_the_margin_of_where_it_is():
 def test_learned_bound_levels_follow_the_cells_the_robot_can_reach_on_its_leg():
     config = LearnedBoundConfig(region=((-2.0, 40.0), (-2.0, 14.0)), dt=0.05, prior_bound=0.05)
     policy = LearnedBoundPolicy(config)
-    _mission(policy, steps=2000)
+    rover_mission(policy, steps=2000)
     # Recomputed here from the cells' bound: at each step, the rung at or above the largest
     # bound within the radius of the undisturbed position, and the radius from the levels
     # before it (the induction of docs/margins.md §5.1).

@@ -31,13 +31,13 @@ controller:
   initial_gain: [[40, 0, 30, 0], [0, 40, 0, 30]]
   probing_std: 5.0
 planner: {{steer_distance: 3.0, iterations_per_step: 20, max_nodes: 800}}
-safety: {{margin: conformal, window: 200{extra}}}
+safety: {{margin: {margin}, window: 200{extra}}}
 """
 
 
-def run(tmp, name, duration, extra=''):
+def run(tmp, name, duration, extra='', margin='conformal'):
     path = tmp / f'{name}.yaml'
-    path.write_text(SCENARIO.format(duration=duration, extra=extra))
+    path.write_text(SCENARIO.format(duration=duration, extra=extra, margin=margin))
     out = tmp / name
     proc = subprocess.run([str(ROOT / 'scripts/rrtq'), 'run', str(path), '--out', str(out),
                            '--mode', 'composed'], capture_output=True, text=True, timeout=300)
@@ -93,3 +93,39 @@ def test_scores_round_trip_through_the_calibration_file(tmp_path):
     assert status[0].samples == len(expected) and status[0].margin_mode == 'conformal'
     again = json.loads((second / 'calibration.json').read_text())['scores']
     assert again[:len(expected)] == written['scores'] and len(again) > len(expected)
+
+
+def test_learned_bound_starts_from_a_pooled_calibration_and_writes_both_categories(tmp_path):
+    """learned_bound, conformal, from a calibration file (docs/margins.md §10): its first
+    leg is grown by the first-leg quantile (0.3 m here, not the running max of nothing), a
+    leg with a tube by that tube times the published scale, the published margin never drops
+    under the leg's within it, and the run's file carries each leg's deviation -- recomputed
+    here from /odom -- over its recorded tube, or raw for a leg without one."""
+    from rrtq_planner.margins.calibration import Calibration, write_calibration
+    cal = tmp_path / 'pooled.json'
+    write_calibration(cal, Calibration((), 'test', normalized=(0.5,) * 25, prior=(0.3,) * 25))
+    out = run(tmp_path, 'learned', 14.0, f', calibration: {cal}', 'learned_bound')
+    status = messages(out / 'run.mcap', '/safety/status')
+    legs: dict[int, list] = {}
+    for s in status:
+        if s.legs == 0:
+            continue
+        row = legs.setdefault(s.legs, [s.leg_margin, s.leg_tube, s.scale, []])
+        row[3].append(s.margin - 0.3)                  # the robot radius of SCENARIO
+    rows = [legs[k] for k in sorted(legs)]
+    assert rows[0][1] == 0.0 and abs(rows[0][0] - 0.3) < 1e-9
+    with_tube = [r for r in rows if r[1] > 0.0]
+    assert with_tube, 'no leg started with a contracting model'
+    for at_start, tube, scale, published in rows:
+        assert min(published) >= at_start - 1e-9
+        if tube > 0.0:
+            assert abs(at_start - scale * tube) <= 1e-9 * max(1.0, at_start)
+    assert abs(with_tube[0][2] - 0.5) < 1e-9            # the pooled scale, before own legs
+    written = json.loads((out / 'calibration.json').read_text())
+    assert written['normalized'][:25] == [0.5] * 25 and written['prior'][:25] == [0.3] * 25
+    deviations = leg_scores(out / 'run.mcap')
+    assert len(deviations) == len(rows)
+    expected_normalized = [d / r[1] for d, r in zip(deviations, rows) if r[1] > 0.0]
+    expected_prior = [d for d, r in zip(deviations, rows) if r[1] <= 0.0]
+    np.testing.assert_allclose(written['normalized'][25:], expected_normalized, rtol=1e-9)
+    np.testing.assert_allclose(written['prior'][25:], expected_prior, rtol=1e-9, atol=1e-12)

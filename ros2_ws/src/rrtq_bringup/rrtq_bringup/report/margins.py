@@ -28,7 +28,7 @@ from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
 from rrtq_common import topics  # noqa: E402
 
-__all__ = ['leg_margins', 'read_estimates', 'true_field', 'plot_margins', 'plot_field',
+__all__ = ['leg_margins', 'leg_tubes', 'read_estimates', 'true_field', 'plot_margins', 'plot_field',
            'margins_summary']
 
 
@@ -56,6 +56,15 @@ def leg_margins(statuses: list[Any]) -> list[tuple[float, float, float]]:
         row = out.setdefault(int(s.legs), [_stamp(s.header), float(s.leg_margin), 0.0])
         row[2] = float(s.leg_deviation)
     return [(t, m, d) for t, m, d in (out[k] for k in sorted(out))]
+
+
+def leg_tubes(statuses: list[Any]) -> list[tuple[float, float]]:
+    """(uncalibrated tube m, scale) of every leg at its start (learned_bound; 0 and 1 else)."""
+    out: dict[int, tuple[float, float]] = {}
+    for s in statuses:
+        if s.legs > 0:
+            out.setdefault(int(s.legs), (float(s.leg_tube), float(s.scale)))
+    return [out[k] for k in sorted(out)]
 
 
 def read_estimates(recording: pathlib.Path) -> list[Any]:
@@ -95,6 +104,7 @@ def plot_margins(statuses: list[Any], robot_radius: float, path: pathlib.Path) -
     t = np.array([_stamp(s.header) for s in statuses])
     margin = np.array([s.margin for s in statuses]) - robot_radius
     legs = leg_margins(statuses)
+    tubes = leg_tubes(statuses)
     fig, ax = plt.subplots(figsize=(9, 4))
     ax.plot(t, margin, color='tab:blue', lw=1.2, label='margin (obstacles grown by, - radius)')
     if legs:
@@ -102,14 +112,24 @@ def plot_margins(statuses: list[Any], robot_radius: float, path: pathlib.Path) -
         in_force = np.array([r[1] for r in legs])
         dev = np.array([r[2] for r in legs])
         ax.hlines(in_force, starts[:-1], starts[1:], color='tab:green', lw=2,
-                  label='margin in force at the leg start')
+                  label='margin in force at the leg start'
+                  + (' (calibrated)' if any(s != 1.0 for _, s in tubes) else ''))
+        tube = np.array([p for p, _ in tubes])
+        if len(tube) == len(in_force) and (tube > 0).any():
+            # learned_bound: the uncalibrated tube each leg was predicted at its start; the
+            # calibrated margin is it times the scale (docs/margins.md §10).
+            has = tube > 0
+            ax.hlines(tube[has], starts[:-1][has], starts[1:][has], color='tab:orange', lw=1,
+                      linestyles='dashed', label='tube predicted (uncalibrated)')
         mid = 0.5 * (starts[:-1] + starts[1:])
         miss = dev > in_force
         ax.plot(mid[~miss], dev[~miss], 'o', color='k', ms=4, label="leg's largest deviation")
         ax.plot(mid[miss], dev[miss], 'x', color='tab:red', ms=7, mew=2,
                 label=f'above its margin ({int(miss.sum())} of {len(dev)} legs)')
     mode = statuses[-1].margin_mode if statuses else ''
-    ax.set_title(f'safety margin ({mode}) against the realised deviations', fontsize=10)
+    scale = (f', last scale {tubes[-1][1]:.2f}' if tubes and any(p > 0 for p, _ in tubes)
+             else '')
+    ax.set_title(f'safety margin ({mode}{scale}) against the realised deviations', fontsize=10)
     ax.set_xlabel('t (s)')
     ax.set_ylabel('m')
     ax.grid(alpha=0.3)

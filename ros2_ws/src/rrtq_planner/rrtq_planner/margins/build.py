@@ -13,7 +13,12 @@ from .learned import LearnedBoundPolicy
 from .learned_data import Bounds, LearnedBoundConfig, ModelFrame
 from .policy import ConformalPolicy, MarginMode, MarginPolicy, RunningMaxPolicy
 
-__all__ = ['MarginConfig', 'make_policy']
+__all__ = ['MarginConfig', 'make_policy', 'CALIBRATED_ADAPTATION']
+
+CALIBRATED_ADAPTATION = 0.005
+"""η of learned_bound's calibrated scale: Gibbs & Candès' γ. A miss lowers δ_t by η(1 − δ);
+at η = 0.05 one gust's leg took δ_t from 0.05 to 0.0025, the quantile to the largest score
+of the pool and the margin of narrow_gap's next legs to 10-17 m (docs/margins.md §10.1)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -90,7 +95,8 @@ def make_policy(mode: MarginMode | str, *, region: Bounds | None, dt: float,
                                                  prior_bound=prior_bound,
                                                  robot_radius=robot_radius),
                               n, m, initial_margin,
-                              CalibratedScale(ConformalConfig(confidence=confidence,
-                                                              window=window),
+                              CalibratedScale(ConformalConfig(
+                                  confidence=confidence, window=window,
+                                  adaptation=CALIBRATED_ADAPTATION),
                                               calibration.normalized, calibration.prior)
                               if conformal else None)

@@ -178,9 +178,12 @@ class CalibratedScale:
 
     def observe(self, deviation: float, tube: float, margin_used: float,
                 adapt: bool) -> None:
-        """Account a finished leg: its largest deviation (m), the tube predicted at its start
-        (m; 0: none, a prior leg) and the margin in force for it (m). ``adapt``: the margin
-        was this category's quantile (not the uncalibrated fallback of a warm-up)."""
+        """Account a finished leg.
+
+        Its largest deviation (m), the tube predicted at its start (m; 0: none, a prior
+        leg) and the margin in force for it (m). ``adapt``: the margin was this category's
+        quantile (not the uncalibrated fallback of a warm-up).
+        """
         if tube > 0.0:
             self.model.observe(deviation / tube, margin_used / tube, adapt)
         else:
