@@ -53,11 +53,26 @@ def _fmt(value: float | None) -> str:
     return '—' if value is None else f'{value:.1f}'
 
 
+def leg_tubes(recording: pathlib.Path) -> dict[int, float]:
+    """Per controller leg index, the tube /safety/status gave it at its start (0: none)."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    factory, out = DecoderFactory(), {}
+    with open(recording, 'rb') as f:
+        for schema, channel, message in make_reader(f).iter_messages(
+                topics=['/safety/status'], log_time_order=True):
+            msg = factory.decoder_for(channel.message_encoding, schema)(message.data)
+            out.setdefault(int(msg.leg_index), float(msg.leg_tube))
+    return out
+
+
 def mode_row(conf: dict, mode: str) -> dict:
     """One mode of one scenario: the sweep's stats and the recordings' coverage."""
     s = conf['stats']
     legs = misses = early_legs = early_misses = not_compatible = 0
     margins: list[float] = []
+    first = [0, 0]           # legs that started without a model (learned_bound), misses
     for run in conf['runs']:
         recording = pathlib.Path(run['dir']) / 'run.mcap'
         if not recording.is_file():
@@ -65,6 +80,9 @@ def mode_row(conf: dict, mode: str) -> dict:
         cov = coverage([recording])
         legs, misses = legs + len(cov.legs), misses + cov.misses
         margins += [leg.margin for leg in cov.legs]
+        tubes = leg_tubes(recording)
+        without = [leg for leg in cov.legs if tubes.get(leg.index, 0.0) <= 0.0]
+        first = [first[0] + len(without), first[1] + sum(not leg.covered for leg in without)]
         early = cov.legs[:EARLY_LEGS]
         early_legs += len(early)
         early_misses += sum(not leg.covered for leg in early)
@@ -72,6 +90,7 @@ def mode_row(conf: dict, mode: str) -> dict:
     path = s['path_over_optimum']
     return {'mode': mode, 'runs': s['completed'],
             'mean_margin': sum(margins) / len(margins) if margins else None,
+            'first_legs': first[0], 'first_misses': first[1],
             'goals': s['successes'], 'collisions': s['collisions'],
             'time': _fmt(s['time_to_goal_s']['median']),
             'path': ('—' if path['median'] is None
@@ -92,13 +111,16 @@ def render(scenarios: dict[str, list[dict]]) -> str:
              'not (`conformal=false`, which ignores it). Legs above their margin come from '
              'the recordings (`python -m rrtq_bringup.margin_coverage`: the least margin '
              'published while the leg ran), with 95 % Clopper-Pearson intervals; "legs 0–2" '
-             'are each mission\'s first three legs; "mean margin": over legs, the margin in '
+             'are each mission\'s first three legs; "without a model": learned_bound\'s legs '
+             'that started with no contracting model (`leg_tube` 0; the calibrated mode\'s '
+             'first-leg category, docs/margins.md §10); "mean margin": over legs, the margin in '
              'force; "missions compatible": each recording alone, the lower end of its '
              'interval at most δ = 0.05.', '',
              '| scenario | mode | goals | collisions | time to goal s (median) | path / optimum '
              '(median / p95) | replans (median) | mean margin m | legs above their margin '
-             '[95 %] | of them in legs 0–2 | after leg 2 [95 %] | missions compatible |',
-             '|---|---|---|---|---|---|---|---|---|---|---|---|']
+             '[95 %] | of them in legs 0–2 | after leg 2 [95 %] | legs without a model above '
+             'their margin | missions compatible |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     for name, rows in scenarios.items():
         for r in rows:
             later_legs = r['legs'] - r['early_legs']
@@ -111,6 +133,9 @@ def render(scenarios: dict[str, list[dict]]) -> str:
                 f"[{r['ci'][0]:.3f}, {r['ci'][1]:.3f}] | {r['early_misses']}/{r['early_legs']} | "
                 f"{later}/{later_legs}, {later / max(later_legs, 1):.3f} "
                 f"[{r['later_ci'][0]:.3f}, {r['later_ci'][1]:.3f}] | "
+                # (— where no leg recorded a tube: running_max, or a recording without it)
+                + (f"{r['first_misses']}/{r['first_legs']} | "
+                   if r.get('first_legs', r['legs']) < r['legs'] else '— | ') +
                 f"{r['runs'] - r['missions_not_compatible']}/{r['runs']} |")
     return '\n'.join(lines)
 
@@ -127,6 +152,8 @@ def main() -> int:
     ap.add_argument('--scenarios', nargs='+', choices=sorted(SCENARIOS), default=list(SCENARIOS))
     ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / 'margins_closed_loop')
     ap.add_argument('--no-save', action='store_true')
+    ap.add_argument('--tabulate', action='store_true',
+                    help='read the runs an earlier call left in --runs instead of running')
     args = ap.parse_args()
     scenarios, commands = {}, []
     for name in args.scenarios:
@@ -140,7 +167,8 @@ def main() -> int:
                   runs: pathlib.Path = runs) -> dict:
             table, command = rrtq_bench(f'{name} {what}', base, runs / what,
                                         [*options, '--seeds', str(seeds), '--first-seed',
-                                         str(first), '--workers', str(args.workers)], settings)
+                                         str(first), '--workers', str(args.workers)], settings,
+                                        run=not args.tabulate)
             commands.append(command)
             return table
 

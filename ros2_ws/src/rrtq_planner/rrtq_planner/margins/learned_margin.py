@@ -295,7 +295,8 @@ class LearnedMargin:
         return max(prior.scores)       # δ_t pushed under 1/(n+1) by misses: all seen
 
     def _calibrate(self) -> None:
-        """At a leg's start: the scale, the leg's tube and category (docs/margins.md §10)."""
+        """At a leg's start: the leg's tube, and calibrated its scale and category (§10)."""
+        self.leg_tube = self.model_margin if math.isfinite(self.model_margin) else 0.0
         if self.calibrated is None:
             return
         model = self.calibrated.model
@@ -306,9 +307,7 @@ class LearnedMargin:
             self.scale = 1.0           # no calibration yet: the bound as it is
         else:
             self.scale = max(1.0, max(model.scores))
-        if math.isfinite(self.model_margin):
-            self.leg_tube = self.model_margin
+        if self.leg_tube > 0.0:
             self.leg_calibrated = not model.warming_up
         else:
-            self.leg_tube = 0.0
             self.leg_calibrated = self._prior_margin() is not None
