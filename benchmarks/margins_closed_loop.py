@@ -152,6 +152,9 @@ def main() -> int:
     ap.add_argument('--scenarios', nargs='+', choices=sorted(SCENARIOS), default=list(SCENARIOS))
     ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / 'margins_closed_loop')
     ap.add_argument('--no-save', action='store_true')
+    ap.add_argument('--reuse-calibration', action='store_true',
+                    help="keep a calibration an earlier call left in --runs (its runs do not "
+                    'depend on the calibrated code: they have none)')
     ap.add_argument('--tabulate', action='store_true',
                     help='read the runs an earlier call left in --runs instead of running')
     args = ap.parse_args()
@@ -164,17 +167,19 @@ def main() -> int:
 
         def bench(what: str, seeds: int, first: int, settings: list[str],
                   name: str = name, base: pathlib.Path = base, options: list[str] = options,
-                  runs: pathlib.Path = runs) -> dict:
+                  runs: pathlib.Path = runs, keep: bool = False) -> dict:
             table, command = rrtq_bench(f'{name} {what}', base, runs / what,
                                         [*options, '--seeds', str(seeds), '--first-seed',
                                          str(first), '--workers', str(args.workers)], settings,
-                                        run=not args.tabulate)
+                                        run=not (args.tabulate or keep))
             commands.append(command)
             return table
 
-        bench('calibration', args.calibration_seeds, CALIBRATION_FIRST_SEED,
-              ['safety.margin=learned_bound'])
         calibration = (runs / 'calibration' / 'calibration-cfg-00.json').resolve()
+        bench('calibration', args.calibration_seeds, CALIBRATION_FIRST_SEED,
+              ['safety.margin=learned_bound'],
+              keep=args.reuse_calibration and calibration.exists())
+
         pooled = json.loads(calibration.read_text())
         print(f'margins_closed_loop: {name}: calibration of {len(pooled["normalized"])} '
               f'normalized and {len(pooled["prior"])} prior scores', file=sys.stderr)

@@ -154,3 +154,22 @@ def test_the_first_legs_margin_comes_from_the_calibration_not_the_running_max():
     scale = CalibratedScale(conformal, cal.normalized, cal.prior)
     assert first[2] == pytest.approx(scale.prior_margin)
     assert model_legs[0][2] == pytest.approx(model_legs[0][1] * scale.scale, rel=1e-9)
+
+
+def test_a_first_leg_grows_the_obstacles_it_can_reach_by_the_calibrated_margin():
+    """Before a contracting model, the calibrated first-leg margin grows what the current leg
+    can reach (within that margin and the robot radius of its segment); a far obstacle keeps
+    the uncalibrated fallback, or a far gap would shut before the robot has moved."""
+    from rrtq_planner.margins.policy import LegInfo, MarginSample
+    from rrtq_testing.margin_missions import PD
+    config = LearnedBoundConfig(region=((-2.0, 14.0), (-2.0, 14.0)), dt=0.05)
+    calibrated = CalibratedScale(ConformalConfig(window=50), (0.5,) * 30, (0.8,) * 30)
+    policy = LearnedBoundPolicy(config, calibrated=calibrated)
+    leg = LegInfo(0, np.zeros(2), np.array([6.0, 0.0]), 6.0)
+    status = policy.step(MarginSample(0.0, np.zeros(4), leg, np.zeros(2), np.zeros(2),
+                                      lambda tau: PD, 10.0))
+    assert status.margin == pytest.approx(0.8) and status.local is not None
+    square = np.array([[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]])
+    assert status.local('near', square + [3.0, 1.7]) == pytest.approx(0.8)   # 1.2 m off
+    assert status.local('far', square + [3.0, 8.0]) == 0.0       # the running max, 0 yet
+    assert LearnedBoundPolicy(config).step(MarginSample(0.0, np.zeros(4), leg)).local is None

@@ -198,7 +198,8 @@ class LearnedBoundPolicy(LearnedMargin):
         t = self.legs
         violation = t.leg is not None and t.leg_max > self.leg_margin and not self.flagged
         self.flagged |= violation
-        local = None if math.isinf(self.model_margin) else self.obstacle_margin
+        local = (self.obstacle_margin if math.isfinite(self.model_margin)
+                 else self.prior_obstacle_margin if self._prior_margin() is not None else None)
         return MarginStatus(self.mode, max(self._now(), t.leg_max), self.leg_margin,
                             self.bank.level * c.prior_bound, c.confidence, self.samples,
                             self.misses + self.flagged, t.d_rob, t.d_rob_max, violation,
