@@ -152,9 +152,10 @@ def main() -> int:
     ap.add_argument('--scenarios', nargs='+', choices=sorted(SCENARIOS), default=list(SCENARIOS))
     ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / 'margins_closed_loop')
     ap.add_argument('--no-save', action='store_true')
-    ap.add_argument('--reuse-calibration', action='store_true',
-                    help="keep a calibration an earlier call left in --runs (its runs do not "
-                    'depend on the calibrated code: they have none)')
+    ap.add_argument('--keep', nargs='+', default=[],
+                    choices=('calibration', 'uncalibrated', 'running_max'),
+                    help='keep these benches of an earlier call in --runs instead of running '
+                    'them again (none of them runs the calibrated code)')
     ap.add_argument('--tabulate', action='store_true',
                     help='read the runs an earlier call left in --runs instead of running')
     args = ap.parse_args()
@@ -178,7 +179,7 @@ def main() -> int:
         calibration = (runs / 'calibration' / 'calibration-cfg-00.json').resolve()
         bench('calibration', args.calibration_seeds, CALIBRATION_FIRST_SEED,
               ['safety.margin=learned_bound'],
-              keep=args.reuse_calibration and calibration.exists())
+              keep='calibration' in args.keep and calibration.exists())
 
         pooled = json.loads(calibration.read_text())
         print(f'margins_closed_loop: {name}: calibration of {len(pooled["normalized"])} '
@@ -187,9 +188,11 @@ def main() -> int:
             'safety.margin=learned_bound', f'safety.calibration={calibration}'])
         rows = [mode_row(calibrated['configurations'][0], 'learned_bound, calibrated')]
         uncalibrated = bench('uncalibrated', args.compare_seeds, 0, [
-            'safety.margin=learned_bound', 'safety.conformal=false'])
+            'safety.margin=learned_bound', 'safety.conformal=false'],
+            keep='uncalibrated' in args.keep and (runs / 'uncalibrated').exists())
         rows.append(mode_row(uncalibrated['configurations'][0], 'learned_bound, conformal=false'))
-        running_max = bench('running_max', args.compare_seeds, 0, ['safety.margin=running_max'])
+        running_max = bench('running_max', args.compare_seeds, 0, ['safety.margin=running_max'],
+                            keep='running_max' in args.keep and (runs / 'running_max').exists())
         rows.append(mode_row(running_max['configurations'][0], 'running_max'))
         scenarios[name] = rows
     text = render(scenarios) + '\n\nCommands:\n\n' + '\n'.join(f'- `{c}`' for c in commands)

@@ -173,3 +173,26 @@ def test_a_first_leg_grows_the_obstacles_it_can_reach_by_the_calibrated_margin()
     assert status.local('near', square + [3.0, 1.7]) == pytest.approx(0.8)   # 1.2 m off
     assert status.local('far', square + [3.0, 8.0]) == 0.0       # the running max, 0 yet
     assert LearnedBoundPolicy(config).step(MarginSample(0.0, np.zeros(4), leg)).local is None
+
+
+def test_the_scale_grows_the_current_legs_margin_and_leaves_far_obstacles_predictions():
+    """The same mission seen by a calibrated and an uncalibrated policy (the rover's flight
+    does not depend on them): the calibrated leg margin is the uncalibrated one times the
+    scale (2 here), and an obstacle no leg has come near keeps the uncalibrated prediction --
+    scaled, bump_mid's scale of 2.2 shut its far gap (docs/margins.md §10.1)."""
+    config = LearnedBoundConfig(region=((-2.0, 14.0), (-2.0, 14.0)), dt=0.05, prior_bound=0.5)
+    plain = LearnedBoundPolicy(config)
+    calibrated = LearnedBoundPolicy(config, calibrated=CalibratedScale(
+        ConformalConfig(window=50), (2.0,) * 40, (0.5,) * 40))
+    rows = {}
+    for name, policy in (('plain', plain), ('calibrated', calibrated)):
+        rows[name] = [s for s, _ in _mission(policy, steps=900, seed=4)[0]]
+    last = {name: r[-1] for name, r in rows.items()}
+    assert last['calibrated'].scale == 2.0 and last['plain'].leg_tube > 0.0
+    assert last['calibrated'].leg_tube == pytest.approx(last['plain'].leg_tube, rel=1e-12)
+    assert last['calibrated'].leg_margin == pytest.approx(2.0 * last['plain'].leg_margin,
+                                                          rel=1e-12)
+    wall = np.array([[20.0, 30.0], [24.0, 30.0], [24.0, 31.0], [20.0, 31.0]])
+    far = {name: p.obstacle_margin('wall', wall) for name, p in (('plain', plain),
+                                                                   ('calibrated', calibrated))}
+    assert far['plain'] > 0.0 and far['calibrated'] == far['plain']

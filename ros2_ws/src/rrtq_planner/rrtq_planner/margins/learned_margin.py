@@ -288,8 +288,10 @@ class LearnedMargin:
             return max(self._margin(), self.legs.leg_max)
         # No nominal part: how a future leg is entered (its start velocity against its line)
         # is known when it starts, and then its own margin grows the obstacles near it.
-        # Calibrated: the future leg's margin will be its tube times the same scale.
-        return self.scale * float((level * tube + z * spread).max())
+        # Calibrated or not, this prediction is the uncalibrated one: the scale is a
+        # statement about the current leg (docs/margins.md §10.1; scaled, a scale of 2.2 from
+        # bump_mid's unlearned bump shut its far gap in 7 of 20 missions).
+        return float((level * tube + z * spread).max())
 
     def _fallback(self) -> float:
         return self.legs.d_rob_max if self.initial_margin is None else self.initial_margin
