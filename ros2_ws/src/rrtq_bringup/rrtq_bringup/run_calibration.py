@@ -23,15 +23,9 @@ from rrtq_bringup.scenario import Scenario
 from rrtq_common import topics
 from rrtq_planner.margins.calibration import Calibration, read_calibration, write_calibration
 
-__all__ = ['CALIBRATION_FILE', 'recorded_scores', 'recorded_calibration',
-           'write_run_calibration']
+__all__ = ['CALIBRATION_FILE', 'recorded_calibration', 'write_run_calibration']
 
 CALIBRATION_FILE = 'calibration.json'
-
-
-def recorded_scores(recording: str | pathlib.Path) -> list[float]:
-    """The leg scores (m, oldest first) of a recording's /safety/status."""
-    return list(recorded_calibration(recording).scores)
 
 
 def recorded_calibration(recording: str | pathlib.Path, source: str = '',

@@ -102,9 +102,9 @@ def read_calibration(path: str | pathlib.Path) -> Calibration:
     unknown = sorted(set(data) - _KEYS)
     if unknown:
         raise ValueError(f'{p}: unknown key {unknown[0]!r}')
-    if data['version'] == 1 and {'normalized', 'prior'} & set(data):
-        raise ValueError(f'{p}: unknown key {sorted({"normalized", "prior"} & set(data))[0]!r} '
-                         'in a version 1 file')
+    newer = sorted({'normalized', 'prior'} & set(data))
+    if data['version'] == 1 and newer:
+        raise ValueError(f'{p}: unknown key {newer[0]!r} in a version 1 file')
     lists = {}
     for key in ('scores', 'normalized', 'prior'):
         value = data.get(key, [] if key != 'scores' else None)

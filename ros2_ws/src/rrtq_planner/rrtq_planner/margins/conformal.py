@@ -26,7 +26,7 @@ import numpy.typing as npt
 from rrtq_common.settings import check, setting
 
 __all__ = ['ConformalConfig', 'ConformalQuantile', 'CalibratedScale', 'conformal_rank',
-           'conformal_quantile', 'minimum_scores', 'aci_miss_rate_bound']
+           'conformal_quantile', 'minimum_scores', 'aci_miss_rate_bound', 'finite_margin']
 
 
 def conformal_rank(n: int, delta: float) -> int:
@@ -135,6 +135,20 @@ class ConformalQuantile:
             self.delta_t += self.config.adaptation * (self.config.delta - miss)
         self.scores.append(float(score))
         return miss
+
+
+def finite_margin(quantile: ConformalQuantile, floor: float = 0.0) -> float | None:
+    """The quantile's margin, finite, or None while it warms up.
+
+    When misses have pushed δ_t under 1/(n + 1) the conformal set is everything; the
+    largest score seen (at least ``floor``) stands in for it.
+    """
+    q = quantile.margin
+    if math.isfinite(q):
+        return q
+    if quantile.warming_up:
+        return None
+    return max(floor, max(quantile.scores))
 
 
 class CalibratedScale:

@@ -18,7 +18,7 @@ import shapely
 from scipy.stats import norm
 
 from .bank import BoundBank
-from .conformal import CalibratedScale
+from .conformal import CalibratedScale, finite_margin
 from .learned_data import LearnedBoundConfig, LegData, ModelFrame
 from .policy import LegTracker, MarginSample
 from .tube import (expanding, leg_spread, leg_tube_terms, nominal_deviation, nominal_path,
@@ -71,6 +71,7 @@ class LearnedMargin:
     leg_tube: float
     leg_calibrated: bool
     leg_margin: float
+    _previous: np.ndarray | None
 
     def _follow_band(self) -> None:
         """The field's bound step by step along the current leg, and the leg's tube with it.
@@ -260,9 +261,8 @@ class LearnedMargin:
         """
         margin = self._now()
         shape = shapely.Polygon(polygon)
-        previous = getattr(self, '_previous', None)
-        parts: list[shapely.Geometry] = ([] if previous is None
-                                         else [shapely.Point(previous[:2])])
+        parts: list[shapely.Geometry] = ([] if self._previous is None
+                                         else [shapely.Point(self._previous[:2])])
         leg = self.legs.leg
         if leg is not None:
             ends = np.asarray([leg.start[:2], leg.target[:2]], dtype=float)
@@ -310,30 +310,13 @@ class LearnedMargin:
 
     def _prior_margin(self) -> float | None:
         """Calibrated: m, the margin of a leg without a model (None: no calibration yet)."""
-        if self.calibrated is None:
-            return None
-        prior = self.calibrated.prior
-        q = prior.margin
-        if math.isfinite(q):
-            return q
-        if prior.warming_up:
-            return None
-        return max(prior.scores)       # δ_t pushed under 1/(n+1) by misses: all seen
+        return None if self.calibrated is None else finite_margin(self.calibrated.prior)
 
     def _calibrate(self) -> None:
         """At a leg's start: the leg's tube, and calibrated its scale and category (§10)."""
         self.leg_tube = self.model_margin if math.isfinite(self.model_margin) else 0.0
         if self.calibrated is None:
             return
-        model = self.calibrated.model
-        q = model.margin
-        if math.isfinite(q):
-            self.scale = q
-        elif model.warming_up:
-            self.scale = 1.0           # no calibration yet: the bound as it is
-        else:
-            self.scale = max(1.0, max(model.scores))
-        if self.leg_tube > 0.0:
-            self.leg_calibrated = not model.warming_up
-        else:
-            self.leg_calibrated = self._prior_margin() is not None
+        scale = finite_margin(self.calibrated.model, floor=1.0)
+        self.scale = 1.0 if scale is None else scale   # None: no calibration yet, the bound
+        self.leg_calibrated = (scale if self.leg_tube > 0.0 else self._prior_margin()) is not None
