@@ -53,8 +53,12 @@ def _fmt(value: float | None) -> str:
     return '—' if value is None else f'{value:.1f}'
 
 
-def leg_tubes(recording: pathlib.Path) -> dict[int, float]:
-    """Per controller leg index, the tube /safety/status gave it at its start (0: none)."""
+def leg_tubes(recording: pathlib.Path) -> dict[int, tuple[float, bool | None]]:
+    """Per controller leg index, the tube at its start and whether it rested on a refuted level.
+
+    The tube is /safety/status's (0: none); None for the level: a recording older than the
+    field.
+    """
     from mcap.reader import make_reader
     from mcap_ros2.decoder import DecoderFactory
 
@@ -63,7 +67,8 @@ def leg_tubes(recording: pathlib.Path) -> dict[int, float]:
         for schema, channel, message in make_reader(f).iter_messages(
                 topics=['/safety/status'], log_time_order=True):
             msg = factory.decoder_for(channel.message_encoding, schema)(message.data)
-            out.setdefault(int(msg.leg_index), float(msg.leg_tube))
+            out.setdefault(int(msg.leg_index),
+                           (float(msg.leg_tube), getattr(msg, 'leg_refuted', None)))
     return out
 
 
@@ -73,6 +78,7 @@ def mode_row(conf: dict, mode: str) -> dict:
     legs = misses = early_legs = early_misses = not_compatible = 0
     margins: list[float] = []
     first = [0, 0]           # legs that started without a model (learned_bound), misses
+    refuted: list[int] | None = [0, 0]   # legs whose tube rested on a refuted level, misses
     for run in conf['runs']:
         recording = pathlib.Path(run['dir']) / 'run.mcap'
         if not recording.is_file():
@@ -81,8 +87,13 @@ def mode_row(conf: dict, mode: str) -> dict:
         legs, misses = legs + len(cov.legs), misses + cov.misses
         margins += [leg.margin for leg in cov.legs]
         tubes = leg_tubes(recording)
-        without = [leg for leg in cov.legs if tubes.get(leg.index, 0.0) <= 0.0]
+        without = [leg for leg in cov.legs if tubes.get(leg.index, (0.0, None))[0] <= 0.0]
         first = [first[0] + len(without), first[1] + sum(not leg.covered for leg in without)]
+        if any(up is None for _, up in tubes.values()):
+            refuted = None
+        elif refuted is not None:
+            up = [leg for leg in cov.legs if tubes.get(leg.index, (0.0, False))[1]]
+            refuted = [refuted[0] + len(up), refuted[1] + sum(not leg.covered for leg in up)]
         early = cov.legs[:EARLY_LEGS]
         early_legs += len(early)
         early_misses += sum(not leg.covered for leg in early)
@@ -91,6 +102,8 @@ def mode_row(conf: dict, mode: str) -> dict:
     return {'mode': mode, 'runs': s['completed'],
             'mean_margin': sum(margins) / len(margins) if margins else None,
             'first_legs': first[0], 'first_misses': first[1],
+            'refuted_legs': None if refuted is None else refuted[0],
+            'refuted_misses': None if refuted is None else refuted[1],
             'goals': s['successes'], 'collisions': s['collisions'],
             'time': _fmt(s['time_to_goal_s']['median']),
             'path': ('—' if path['median'] is None
@@ -113,14 +126,16 @@ def render(scenarios: dict[str, list[dict]]) -> str:
              'published while the leg ran), with 95 % Clopper-Pearson intervals; "legs 0–2" '
              'are each mission\'s first three legs; "without a model": learned_bound\'s legs '
              'that started with no contracting model (`leg_tube` 0; the calibrated mode\'s '
-             'first-leg category, docs/margins.md §10); "mean margin": over legs, the margin in '
-             'force; "missions compatible": each recording alone, the lower end of its '
-             'interval at most δ = 0.05.', '',
+             'first-leg category, docs/margins.md §10); "on a refuted level": legs whose tube '
+             'rested on a bound residuals had raised above the prior bound (`leg_refuted`, '
+             'the third category; — for recordings made before it); "mean margin": over legs, '
+             'the margin in force; "missions compatible": each recording alone, the lower end '
+             'of its interval at most δ = 0.05.', '',
              '| scenario | mode | goals | collisions | time to goal s (median) | path / optimum '
              '(median / p95) | replans (median) | mean margin m | legs above their margin '
              '[95 %] | of them in legs 0–2 | after leg 2 [95 %] | legs without a model above '
-             'their margin | missions compatible |',
-             '|---|---|---|---|---|---|---|---|---|---|---|---|---|']
+             'their margin | legs on a refuted level above their margin | missions compatible |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|---|---|']
     for name, rows in scenarios.items():
         for r in rows:
             later_legs = r['legs'] - r['early_legs']
@@ -136,6 +151,9 @@ def render(scenarios: dict[str, list[dict]]) -> str:
                 # (— where no leg recorded a tube: running_max, or a recording without it)
                 + (f"{r['first_misses']}/{r['first_legs']} | "
                    if r.get('first_legs', r['legs']) < r['legs'] else '— | ') +
+                (f"{r['refuted_misses']}/{r['refuted_legs']} | "
+                 if r.get('refuted_legs') is not None and r['mode'] != 'running_max'
+                 else '— | ') +
                 f"{r['runs'] - r['missions_not_compatible']}/{r['runs']} |")
     return '\n'.join(lines)
 
@@ -183,7 +201,8 @@ def main() -> int:
 
         pooled = json.loads(calibration.read_text())
         print(f'margins_closed_loop: {name}: calibration of {len(pooled["normalized"])} '
-              f'normalized and {len(pooled["prior"])} prior scores', file=sys.stderr)
+              f'normalized, {len(pooled.get("refuted", []))} refuted and '
+              f'{len(pooled["prior"])} prior scores', file=sys.stderr)
         calibrated = bench('learned_bound', args.seeds, 0, [
             'safety.margin=learned_bound', f'safety.calibration={calibration}'])
         rows = [mode_row(calibrated['configurations'][0], 'learned_bound, calibrated')]

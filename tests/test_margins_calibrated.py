@@ -111,6 +111,91 @@ def test_scores_from_another_generator_break_the_guarantee_and_the_adaptive_leve
                     (prior, rate)
 
 
+def bump_missions(rng, count, legs=15):
+    """Legs of missions through fields the model meets as it goes: (deviation, tube, refuted).
+
+    A leg with a model rests on the prior bound (2 in 3) or on a level residuals raised
+    (refuted, a field already met). On the prior bound one leg in six enters a field the data
+    had not shown and deviates six times as much; a refuted level bounds a field that was
+    measured, and its tube is conservative.
+    """
+    out = []
+    for mission in missions(rng, count, legs):
+        flown = []
+        for deviation, tube in mission:
+            refuted = tube > 0.0 and rng.uniform() < 1 / 3
+            if tube > 0.0:
+                deviation *= 0.5 if refuted else (6.0 if rng.uniform() < 1 / 6 else 1.0)
+            flown.append((deviation, tube, refuted))
+        out.append(flown)
+    return out
+
+
+def test_legs_on_a_refuted_level_are_their_own_category_and_keep_their_tighter_margin():
+    """Three Mondrian categories (docs/margins.md §10): every category of new missions stays
+    under its margin on 1 − δ of its legs, and a leg on a refuted level is not charged for the
+    fields entered unseen on the prior bound: its scale is well under the one quantile of both
+    (bump_mid: 3.1 on every model leg shut the gap from inside the learned bump). Until its
+    category can certify, a refuted leg takes that pooled quantile and does not move its
+    category's level."""
+    rng = np.random.default_rng(11)
+    config = ConformalConfig(confidence=1 - DELTA, window=50, adaptation=0.0)
+    flown, ratios = [], []
+    for trial in range(150):
+        pool = [leg for m in bump_missions(rng, 20) for leg in m]
+        scale = CalibratedScale(config, [d / p for d, p, up in pool if p > 0.0 and not up],
+                                [d for d, p, _ in pool if p <= 0.0],
+                                [d / p for d, p, up in pool if up])
+        both = CalibratedScale(config, [d / p for d, p, _ in pool if p > 0.0])
+        own, certified = scale.leg_scale(True)
+        assert certified and own is not None and math.isfinite(both.scale)
+        ratios.append(own / both.scale)
+        for deviation, tube, refuted in bump_missions(rng, 1)[0]:
+            if tube > 0.0:
+                factor, certified = scale.leg_scale(refuted)
+                assert certified and factor is not None
+                margin = tube * factor
+            else:
+                margin = scale.prior_margin
+            flown.append((deviation, margin, 'prior' if tube <= 0.0 else refuted))
+            scale.observe(deviation, tube, margin, True, refuted)
+    for category in ('prior', False, True):
+        legs = [(d, m) for d, m, c in flown if c == category]
+        misses = sum(d > m for d, m in legs)
+        low, high = binomial_interval(misses, len(legs))
+        assert low <= DELTA <= high, (category, misses, len(legs))
+    assert np.median(ratios) < 0.5, np.median(ratios)
+    # No refuted scores yet: the quantile of both model categories, and no adaptation.
+    fresh = CalibratedScale(ConformalConfig(window=50, adaptation=0.05),
+                            [0.2] * 10 + [0.9] * 30, refuted=[0.1] * 5)
+    assert fresh.leg_scale(True) == (pytest.approx(0.9), False)
+    assert fresh.leg_scale(False) == (pytest.approx(0.9), True)
+    fresh.observe(5.0, 1.0, 0.9, False, True)
+    assert fresh.refuted.delta_t == fresh.refuted.config.delta and list(fresh.refuted.scores)[-1] == 5.0
+    assert list(fresh.model.scores)[-1] == 0.9
+
+
+def test_a_leg_on_a_refuted_level_takes_its_categorys_scale_in_the_policy():
+    """learned_bound on the rover through a bump the prior bound (0.1 m/s²) understates: once
+    residuals raise the bank above it, the legs are marked refuted (the bound the status
+    publishes above the prior bound at their start) and grown by their tube times the refuted
+    category's scale (1.2 here); a leg on the prior bound by the normalized one's (2)."""
+    config = LearnedBoundConfig(region=((-2.0, 14.0), (-2.0, 14.0)), dt=0.05, prior_bound=0.1)
+    policy = LearnedBoundPolicy(config, calibrated=CalibratedScale(
+        ConformalConfig(window=50), (2.0,) * 40, (0.5,) * 40, (1.2,) * 40))
+    starts: dict[int, object] = {}
+    for status, _ in _mission(policy, steps=1500, seed=4)[0]:
+        starts.setdefault(status.legs, status)
+    with_tube = [s for s in starts.values() if s.leg_tube > 0.0]
+    kinds = {s.leg_refuted for s in with_tube}
+    assert kinds == {False, True}, kinds
+    for s in with_tube:
+        assert s.leg_refuted == (s.bound > config.prior_bound * (1 + 1e-9))
+        assert s.scale == (1.2 if s.leg_refuted else 2.0)
+        assert s.leg_margin == pytest.approx(s.scale * s.leg_tube, rel=1e-12)
+    assert not any(s.leg_refuted for s in starts.values() if s.leg_tube <= 0.0)
+
+
 def _legs(rows):
     """Per leg (as /safety/status counts them): (largest deviation, tube, margin at start,
     least published margin), as the recording's reader takes them."""

@@ -83,22 +83,31 @@ def test_calibration_round_trip_and_bad_files(tmp_path):
     write_calibration(good, cal.extended([0.3]))
     back = read_calibration(good)
     assert back.scores == (0.4, 0.2, 0.3) and back.source == 'rrtqx-paper seed 7'
-    # Version 2 carries learned_bound's two categories; pooling keeps every file's, in order.
-    two = cal.extended([0.3], normalized=[0.8, 1.1], prior=[0.25])
-    write_calibration(good, pooled([two, Calibration((0.5,), normalized=(0.7,))], 'bench'))
+    # Version 3 carries learned_bound's three categories; pooling keeps every file's, in order.
+    three = cal.extended([0.3], normalized=[0.8, 1.1], prior=[0.25], refuted=[0.4])
+    write_calibration(good, pooled([three, Calibration((0.5,), normalized=(0.7,),
+                                                       refuted=(0.6,))], 'bench'))
     back = read_calibration(good)
     assert back.scores == (0.4, 0.2, 0.3, 0.5) and back.normalized == (0.8, 1.1, 0.7)
-    assert back.prior == (0.25,) and back.source == 'bench'
-    # A version 1 file (scores only) is still read, with both categories empty.
+    assert back.prior == (0.25,) and back.refuted == (0.4, 0.6) and back.source == 'bench'
+    # A version 1 file (scores only) is still read, with the categories empty; a version 2
+    # file with no refuted category.
     old = tmp_path / 'old.json'
     old.write_text(json.dumps({'format': 'rrtq-margin-calibration', 'version': 1,
                                'scores': [0.1]}))
     assert read_calibration(old) == Calibration((0.1,))
+    old.write_text(json.dumps({'format': 'rrtq-margin-calibration', 'version': 2,
+                               'scores': [0.1], 'normalized': [0.5], 'prior': [0.2]}))
+    assert read_calibration(old) == Calibration((0.1,), normalized=(0.5,), prior=(0.2,))
     cases = {
         'notjson': 'scores: [1, 2]',
         'list': '[0.1, 0.2]',
         'format': json.dumps({'format': 'other', 'version': 1, 'scores': []}),
-        'version': json.dumps({'format': 'rrtq-margin-calibration', 'version': 3, 'scores': []}),
+        'version': json.dumps({'format': 'rrtq-margin-calibration', 'version': 4, 'scores': []}),
+        'boolversion': json.dumps({'format': 'rrtq-margin-calibration', 'version': True,
+                                   'scores': []}),
+        'v2refuted': json.dumps({'format': 'rrtq-margin-calibration', 'version': 2,
+                                 'scores': [], 'refuted': [0.1]}),
         'v1prior': json.dumps({'format': 'rrtq-margin-calibration', 'version': 1, 'scores': [],
                                'prior': [0.1]}),
         'badprior': json.dumps({'format': 'rrtq-margin-calibration', 'version': 2,
@@ -112,7 +121,8 @@ def test_calibration_round_trip_and_bad_files(tmp_path):
                                'scores': 0.5}),
     }
     expect = {'notjson': 'not a JSON', 'list': 'JSON object', 'format': 'format',
-              'version': 'version 3', 'v1prior': "'prior'", 'badprior': 'prior: a score',
+              'version': 'version 4', 'boolversion': 'version True',
+              'v2refuted': "'refuted' in a version 2", 'v1prior': "'prior'", 'badprior': 'prior: a score',
               'key': "'window'", 'negative': '-1.0', 'nan': 'nan',
               'notlist': 'list'}
     for name, text in cases.items():

@@ -95,37 +95,45 @@ def test_scores_round_trip_through_the_calibration_file(tmp_path):
     assert again[:len(expected)] == written['scores'] and len(again) > len(expected)
 
 
-def test_learned_bound_starts_from_a_pooled_calibration_and_writes_both_categories(tmp_path):
+def test_learned_bound_starts_from_a_pooled_calibration_and_writes_its_categories(tmp_path):
     """learned_bound, conformal, from a calibration file (docs/margins.md §10): its first
     leg is grown by the first-leg quantile (0.3 m here, not the running max of nothing), a
-    leg with a tube by that tube times the published scale, the published margin never drops
-    under the leg's within it, and the run's file carries each leg's deviation -- recomputed
-    here from /odom -- over its recorded tube, or raw for a leg without one."""
+    leg with a tube by that tube times the published scale -- its category's, 0.5 on the
+    prior bound, 0.8 on a refuted level -- the published margin never drops under the leg's
+    within it, and the run's file carries each leg's deviation -- recomputed here from /odom
+    -- over its recorded tube, in its category, or raw for a leg without one."""
     from rrtq_planner.margins.calibration import Calibration, write_calibration
     cal = tmp_path / 'pooled.json'
-    write_calibration(cal, Calibration((), 'test', normalized=(0.5,) * 25, prior=(0.3,) * 25))
+    write_calibration(cal, Calibration((), 'test', normalized=(0.5,) * 25, prior=(0.3,) * 25,
+                                       refuted=(0.8,) * 25))
     out = run(tmp_path, 'learned', 14.0, f', calibration: {cal}', 'learned_bound')
     status = messages(out / 'run.mcap', '/safety/status')
     legs: dict[int, list] = {}
     for s in status:
         if s.legs == 0:
             continue
-        row = legs.setdefault(s.legs, [s.leg_margin, s.leg_tube, s.scale, []])
+        row = legs.setdefault(s.legs, [s.leg_margin, s.leg_tube, s.scale, [], s.leg_refuted])
         row[3].append(s.margin - 0.3)                  # the robot radius of SCENARIO
     rows = [legs[k] for k in sorted(legs)]
     assert rows[0][1] == 0.0 and abs(rows[0][0] - 0.3) < 1e-9
     with_tube = [r for r in rows if r[1] > 0.0]
     assert with_tube, 'no leg started with a contracting model'
-    for at_start, tube, scale, published in rows:
+    for at_start, tube, scale, published, _ in rows:
         assert min(published) >= at_start - 1e-9
         if tube > 0.0:
             assert abs(at_start - scale * tube) <= 1e-9 * max(1.0, at_start)
-    assert abs(with_tube[0][2] - 0.5) < 1e-9            # the pooled scale, before own legs
+    # Each category's pooled scale, before its own legs.
+    for refuted, pooled in ((False, 0.5), (True, 0.8)):
+        first = next((r for r in with_tube if r[4] == refuted), None)
+        assert first is None or abs(first[2] - pooled) < 1e-9
     written = json.loads((out / 'calibration.json').read_text())
     assert written['normalized'][:25] == [0.5] * 25 and written['prior'][:25] == [0.3] * 25
+    assert written['refuted'][:25] == [0.8] * 25
     deviations = leg_scores(out / 'run.mcap')
     assert len(deviations) == len(rows)
-    expected_normalized = [d / r[1] for d, r in zip(deviations, rows) if r[1] > 0.0]
+    expected = {key: [d / r[1] for d, r in zip(deviations, rows) if r[1] > 0.0 and r[4] == up]
+                for key, up in (('normalized', False), ('refuted', True))}
     expected_prior = [d for d, r in zip(deviations, rows) if r[1] <= 0.0]
-    np.testing.assert_allclose(written['normalized'][25:], expected_normalized, rtol=1e-9)
+    for key, values in expected.items():
+        np.testing.assert_allclose(written[key][25:], values, rtol=1e-9)
     np.testing.assert_allclose(written['prior'][25:], expected_prior, rtol=1e-9, atol=1e-12)

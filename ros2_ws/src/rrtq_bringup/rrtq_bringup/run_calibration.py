@@ -3,9 +3,10 @@
 The score of a leg is its largest deviation D_rob from its straight edge; /safety/status
 carries the current leg's largest deviation so far (``leg_deviation``), the count of legs
 measured (``legs``) and, under ``learned_bound``, the tube predicted for the leg at its
-start (``leg_tube``, 0 for a leg without a model), so the scores are read off the
-recording: the last ``leg_deviation`` of each leg, and learned_bound's two categories
-(deviation / tube where there was a tube, the raw deviation where there was none). A run
+start (``leg_tube``, 0 for a leg without a model) and whether that tube rested on a level
+residuals had raised (``leg_refuted``), so the scores are read off the recording: the last
+``leg_deviation`` of each leg, and learned_bound's three categories (deviation / tube where
+there was a tube, by its level; the raw deviation where there was none). A run
 started from a calibration (``safety.calibration``) writes the old scores followed by its
 own, as a robot carries its calibration from mission to mission; ``rrtq bench`` pools its
 runs' own scores (:func:`recorded_calibration`) into one file.
@@ -30,22 +31,27 @@ CALIBRATION_FILE = 'calibration.json'
 
 def recorded_calibration(recording: str | pathlib.Path, source: str = '',
                          created: str = '') -> Calibration:
-    """The run's own scores: raw, and learned_bound's normalized and prior categories."""
+    """The run's own scores: raw, and learned_bound's normalized, refuted and prior categories.
+
+    A recording older than ``leg_refuted`` counts every leg with a tube as normalized.
+    """
     factory = DecoderFactory()
-    last: dict[int, tuple[float, float]] = {}
+    last: dict[int, tuple[float, float, bool]] = {}
     learned = False
     with open(recording, 'rb') as f:
         for schema, channel, raw in make_reader(f).iter_messages(topics=[topics.SAFETY_STATUS],
                                                                  log_time_order=True):
             msg = factory.decoder_for(channel.message_encoding, schema)(raw.data)
             if msg.legs > 0:
-                last[int(msg.legs)] = (float(msg.leg_deviation), float(msg.leg_tube))
+                last[int(msg.legs)] = (float(msg.leg_deviation), float(msg.leg_tube),
+                                       bool(getattr(msg, 'leg_refuted', False)))
                 learned |= msg.margin_mode == 'learned_bound'
-    legs = [last[k] for k in sorted(last)]
-    normalized = [d / tube for d, tube in legs if tube > 0.0] if learned else []
-    prior = [d for d, tube in legs if tube <= 0.0] if learned else []
-    return Calibration(tuple(d for d, _ in legs), source, created, tuple(normalized),
-                       tuple(prior))
+    ordered = [last[k] for k in sorted(last)]
+    legs = ordered if learned else []
+    return Calibration(tuple(d for d, _, _ in ordered), source, created,
+                       tuple(d / tube for d, tube, up in legs if tube > 0.0 and not up),
+                       tuple(d for d, tube, _ in legs if tube <= 0.0),
+                       tuple(d / tube for d, tube, up in legs if tube > 0.0 and up))
 
 
 def write_run_calibration(scenario: Scenario, recording: pathlib.Path) -> pathlib.Path:
@@ -56,5 +62,5 @@ def write_run_calibration(scenario: Scenario, recording: pathlib.Path) -> pathli
     out = recording.parent / CALIBRATION_FILE
     own = recorded_calibration(recording)
     write_calibration(out, base.extended(own.scores, f'{scenario.name} seed {scenario.seed}',
-                                         created, own.normalized, own.prior))
+                                         created, own.normalized, own.prior, own.refuted))
     return out

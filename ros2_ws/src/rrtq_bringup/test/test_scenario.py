@@ -392,7 +392,7 @@ def test_safety_section_defaults_and_a_calibration_read_from_the_scenario_direct
 
 @pytest.mark.parametrize(('text', 'fragment'), [
     ('{"format": "rrtq-margin-calibration", "version": 1, "scores": [0.1, -2]}', 'scores'),
-    ('{"format": "rrtq-margin-calibration", "version": 3, "scores": []}', 'version 3'),
+    ('{"format": "rrtq-margin-calibration", "version": 4, "scores": []}', 'version 4'),
     ('{"scores": [0.1', 'not a JSON'),
 ])
 def test_bad_calibration_file_names_the_scenario_key_and_the_file(tmp_path, text, fragment):

@@ -136,6 +136,7 @@ def safety_status_msg(header: Header, step: SafetyStep, margin: MarginStatus) ->
         bound_violations=int(margin.bound_violations),
         leg_deviation=float(margin.leg_deviation), legs=int(margin.legs),
         leg_tube=float(margin.leg_tube), scale=float(margin.scale),
+        leg_refuted=bool(margin.leg_refuted),
         obstacle_distance=float(step.obstacle_distance),
         obstacle_direction=Vector3(x=step.obstacle_direction[0], y=step.obstacle_direction[1]),
         ahead_distance=float(step.ahead_distance),

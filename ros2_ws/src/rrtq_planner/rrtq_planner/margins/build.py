@@ -36,8 +36,8 @@ class MarginConfig:
                                            'unset: the running max of D_rob')
     calibration: str | None = setting(None, doc='calibration file of earlier runs '
                                       '(absolute path; conformal: its scores fill the window; '
-                                      'learned_bound: its normalized and prior scores calibrate '
-                                      'the scale and the first legs)')
+                                      'learned_bound: its normalized, refuted and prior scores '
+                                      'calibrate the scale and the first legs)')
     conformal: bool = setting(True, doc='learned_bound: calibrate the scale of the tube '
                               'conformally (docs/margins.md section 10); false: the '
                               'uncalibrated bound')
@@ -98,5 +98,6 @@ def make_policy(mode: MarginMode | str, *, region: Bounds | None, dt: float,
                               CalibratedScale(ConformalConfig(
                                   confidence=confidence, window=window,
                                   adaptation=CALIBRATED_ADAPTATION),
-                                              calibration.normalized, calibration.prior)
+                                              calibration.normalized, calibration.prior,
+                                              calibration.refuted)
                               if conformal else None)

@@ -152,38 +152,63 @@ def finite_margin(quantile: ConformalQuantile, floor: float = 0.0) -> float | No
 
 
 class CalibratedScale:
-    """``learned_bound``'s conformal calibration: two Mondrian categories (docs/margins.md §10).
+    """``learned_bound``'s conformal calibration: three Mondrian categories (docs/margins.md §10).
 
     A leg that starts with a contracting model is scored by its largest deviation over the
     tube ``learned_bound`` predicted for it at its start (normalized, locally adaptive
     conformal scores: Papadopoulos et al. 2008, Lei et al. 2018 §5.2); its margin is that
-    tube times the conformal quantile of the scores, the *scale*. A leg that starts without
-    one (a mission's first legs) has no tube: it is scored raw, in m, and its margin is the
-    conformal quantile of those. Each category has its own window and adaptive level δ_t
-    (Mondrian conformal prediction, Vovk et al. 2005 §4.5: the guarantee holds within each
-    category, so over all legs too).
+    tube times the conformal quantile of the scores, the *scale*. Those legs fall in two
+    categories by the level their tube rests on: the prior bound R, unrefuted along the leg
+    (a miss there is a field the data had not shown: a bump entered), or a level residuals
+    raised above R (a field already met, bounded by what was measured). A leg that starts
+    without a model (a mission's first legs) has no tube: it is scored raw, in m, and its
+    margin is the conformal quantile of those. Each category has its own window and adaptive
+    level δ_t (Mondrian conformal prediction, Vovk et al. 2005 §4.5: the guarantee holds
+    within each category, so over all legs too). A refuted leg whose category cannot certify
+    1 − δ yet takes the quantile of both model categories' scores together (the two-category
+    calibration), and its score does not move its category's level.
 
     Parameters
     ----------
     config
         Confidence, window (legs of this run kept beside the calibration), adaptation.
-    normalized, prior
-        The two categories' scores of earlier runs (:mod:`.calibration`), oldest first:
-        all of them are kept, and this run's last ``window`` legs with them.
+    normalized, prior, refuted
+        The categories' scores of earlier runs (:mod:`.calibration`), oldest first: all of
+        them are kept, and this run's last ``window`` legs with them.
     """
 
     def __init__(self, config: ConformalConfig, normalized: Iterable[float] = (),
-                 prior: Iterable[float] = ()) -> None:
-        normalized, prior = list(normalized), list(prior)
-        self.model = ConformalQuantile(
-            dataclasses.replace(config, window=config.window + len(normalized)), normalized)
-        self.prior = ConformalQuantile(
-            dataclasses.replace(config, window=config.window + len(prior)), prior)
+                 prior: Iterable[float] = (), refuted: Iterable[float] = ()) -> None:
+        def category(scores: Iterable[float]) -> ConformalQuantile:
+            kept = list(scores)
+            return ConformalQuantile(
+                dataclasses.replace(config, window=config.window + len(kept)), kept)
+
+        self.model = category(normalized)
+        """Legs whose tube rests on the prior bound R (the bank's level at most 1)."""
+        self.refuted = category(refuted)
+        """Legs whose tube rests on a level residuals raised above R."""
+        self.prior = category(prior)
+        """Legs without a contracting model at their start (scored raw, m)."""
 
     @property
     def scale(self) -> float:
-        """The factor on the predicted tube; +inf while the scores cannot certify 1 − δ_t."""
+        """The factor on a tube at the prior bound; +inf while it cannot certify 1 − δ_t."""
         return self.model.margin
+
+    def leg_scale(self, refuted: bool) -> tuple[float | None, bool]:
+        """The factor on the tube of a leg starting now, and whether it is its category's own.
+
+        (None, False) while nothing certifies it (the caller keeps the bound unscaled). The
+        finite stand-in of :func:`finite_margin` (at least 1) where δ_t fell below 1/(n + 1).
+        """
+        own = self.refuted if refuted else self.model
+        scale = finite_margin(own, floor=1.0)
+        if scale is not None or not refuted:
+            return scale, scale is not None
+        both = [*self.model.scores, *self.refuted.scores]
+        pooled = conformal_quantile(both, self.model.config.delta)
+        return (pooled if math.isfinite(pooled) else None), False
 
     @property
     def prior_margin(self) -> float:
@@ -191,14 +216,15 @@ class CalibratedScale:
         return self.prior.margin
 
     def observe(self, deviation: float, tube: float, margin_used: float,
-                adapt: bool) -> None:
+                adapt: bool, refuted: bool = False) -> None:
         """Account a finished leg.
 
         Its largest deviation (m), the tube predicted at its start (m; 0: none, a prior
-        leg) and the margin in force for it (m). ``adapt``: the margin was this category's
-        quantile (not the uncalibrated fallback of a warm-up).
+        leg), the margin in force for it (m) and whether its tube rested on a refuted level.
+        ``adapt``: the margin was this category's quantile (not a fallback).
         """
         if tube > 0.0:
-            self.model.observe(deviation / tube, margin_used / tube, adapt)
+            own = self.refuted if refuted else self.model
+            own.observe(deviation / tube, margin_used / tube, adapt)
         else:
             self.prior.observe(deviation, margin_used, adapt)

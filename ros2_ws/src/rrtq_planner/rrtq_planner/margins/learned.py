@@ -74,8 +74,10 @@ class LearnedBoundPolicy(LearnedMargin):
         """The factor on the predicted tube (1 without calibration or before it certifies)."""
         self.leg_tube = 0.0
         """m, the current leg's uncalibrated prediction at its start (0: no model then)."""
+        self.leg_refuted = False
+        """Whether the current leg's tube rests on a level residuals raised above R."""
         self.leg_calibrated = False
-        """Whether the current leg's margin came from a calibrated quantile (ACI adapts)."""
+        """Whether the current leg's margin came from its category's quantile (ACI adapts)."""
         self.n, self.m, self.d = n, m, n + m
         self.initial_margin = initial_margin
         self.features = RBFFeatures(config.region, config.feature_spacing)
@@ -174,7 +176,7 @@ class LearnedBoundPolicy(LearnedMargin):
             self.misses += ended > self.leg_margin
             if self.calibrated is not None:
                 self.calibrated.observe(ended, self.leg_tube, self.leg_margin,
-                                        self.leg_calibrated)
+                                        self.leg_calibrated, self.leg_refuted)
         if self.legs.new_leg:
             if self.current is not None:
                 self.data.append(self.current)
@@ -204,7 +206,8 @@ class LearnedBoundPolicy(LearnedMargin):
                             self.bank.level * c.prior_bound, c.confidence, self.samples,
                             self.misses + self.flagged, t.d_rob, t.d_rob_max, violation,
                             self.bank.violations, t.leg_max, t.count, local,
-                            leg_tube=self.leg_tube, scale=self.scale)
+                            leg_tube=self.leg_tube, scale=self.scale,
+                            leg_refuted=self.leg_refuted)
 
     def estimate(self) -> FieldEstimate | None:
         """The last fit's field and band as accelerations on the cells; None before a fit."""

@@ -69,6 +69,7 @@ class LearnedMargin:
     calibrated: CalibratedScale | None
     scale: float
     leg_tube: float
+    leg_refuted: bool
     leg_calibrated: bool
     leg_margin: float
     _previous: np.ndarray | None
@@ -313,10 +314,17 @@ class LearnedMargin:
         return None if self.calibrated is None else finite_margin(self.calibrated.prior)
 
     def _calibrate(self) -> None:
-        """At a leg's start: the leg's tube, and calibrated its scale and category (§10)."""
+        """At a leg's start: the leg's tube and category, and calibrated its scale (§10).
+
+        The category: whether the tube rests on a level above the prior bound R, one that
+        residuals within reach of the leg raised (the cells' bound is at most 1 elsewhere).
+        """
         self.leg_tube = self.model_margin if math.isfinite(self.model_margin) else 0.0
+        self.leg_refuted = self.leg_tube > 0.0 and self.bank.level > 1.0
         if self.calibrated is None:
             return
-        scale = finite_margin(self.calibrated.model, floor=1.0)
+        if self.leg_tube > 0.0:
+            scale, self.leg_calibrated = self.calibrated.leg_scale(self.leg_refuted)
+        else:
+            scale, self.leg_calibrated = None, self._prior_margin() is not None
         self.scale = 1.0 if scale is None else scale   # None: no calibration yet, the bound
-        self.leg_calibrated = (scale if self.leg_tube > 0.0 else self._prior_margin()) is not None

@@ -121,6 +121,9 @@ class MarginStatus:
     started without a contracting model, or in the other modes."""
     scale: float = 1.0
     """learned_bound, conformal: the calibrated factor on the tube (1: uncalibrated)."""
+    leg_refuted: bool = False
+    """learned_bound: the current leg's tube rests on a level residuals raised above the prior
+    bound (its normalized score belongs to the refuted category, docs/margins.md §10)."""
 
 
 class MarginPolicy(Protocol):
