@@ -260,17 +260,20 @@ def test_a_first_leg_grows_the_obstacles_it_can_reach_by_the_calibrated_margin()
     assert LearnedBoundPolicy(config).step(MarginSample(0.0, np.zeros(4), leg)).local is None
 
 
-def test_the_scale_grows_the_current_legs_margin_and_leaves_far_obstacles_predictions():
-    """The same mission seen by a calibrated and an uncalibrated policy (the rover's flight
+def test_the_scale_grows_the_current_legs_margin_and_shrinks_far_obstacles_predictions_only():
+    """The same mission seen by calibrated and uncalibrated policies (the rover's flight
     does not depend on them): the calibrated leg margin is the uncalibrated one times the
     scale (2 here), and an obstacle no leg has come near keeps the uncalibrated prediction --
-    scaled, bump_mid's scale of 2.2 shut its far gap (docs/margins.md §10.1)."""
+    scaled up, bump_mid's scale of 2.2 shut its far gap (docs/margins.md §10.1) -- unless
+    the scale is below 1 (0.4 here): then the prediction shrinks with it."""
     config = LearnedBoundConfig(region=((-2.0, 14.0), (-2.0, 14.0)), dt=0.05, prior_bound=0.5)
     plain = LearnedBoundPolicy(config)
     calibrated = LearnedBoundPolicy(config, calibrated=CalibratedScale(
         ConformalConfig(window=50), (2.0,) * 40, (0.5,) * 40))
+    tight = LearnedBoundPolicy(config, calibrated=CalibratedScale(
+        ConformalConfig(window=50), (0.4,) * 40, (0.5,) * 40))
     rows = {}
-    for name, policy in (('plain', plain), ('calibrated', calibrated)):
+    for name, policy in (('plain', plain), ('calibrated', calibrated), ('tight', tight)):
         rows[name] = [s for s, _ in _mission(policy, steps=900, seed=4)[0]]
     last = {name: r[-1] for name, r in rows.items()}
     assert last['calibrated'].scale == 2.0 and last['plain'].leg_tube > 0.0
@@ -278,6 +281,8 @@ def test_the_scale_grows_the_current_legs_margin_and_leaves_far_obstacles_predic
     assert last['calibrated'].leg_margin == pytest.approx(2.0 * last['plain'].leg_margin,
                                                           rel=1e-12)
     wall = np.array([[20.0, 30.0], [24.0, 30.0], [24.0, 31.0], [20.0, 31.0]])
-    far = {name: p.obstacle_margin('wall', wall) for name, p in (('plain', plain),
-                                                                   ('calibrated', calibrated))}
+    far = {name: p.obstacle_margin('wall', wall) for name, p in (
+        ('plain', plain), ('calibrated', calibrated), ('tight', tight))}
+    assert last['tight'].scale == 0.4 and not last['tight'].leg_refuted
     assert far['plain'] > 0.0 and far['calibrated'] == far['plain']
+    assert far['tight'] == pytest.approx(0.4 * far['plain'], rel=1e-12)

@@ -289,10 +289,22 @@ class LearnedMargin:
             return max(self._margin(), self.legs.leg_max)
         # No nominal part: how a future leg is entered (its start velocity against its line)
         # is known when it starts, and then its own margin grows the obstacles near it.
-        # Calibrated or not, this prediction is the uncalibrated one: the scale is a
-        # statement about the current leg (docs/margins.md §10.1; scaled, a scale of 2.2 from
-        # bump_mid's unlearned bump shut its far gap in 7 of 20 missions).
-        return float((level * tube + z * spread).max())
+        return float((level * tube + z * spread).max()) * self._far_scale(level)
+
+    def _far_scale(self, level: float) -> float:
+        """Calibrated: the factor on a far obstacle's prediction -- at most 1 (§10.1).
+
+        The scale of the category a leg passing it would start in (refuted where the level
+        there is above 1) where that is below 1: the calibration measured that such legs'
+        tubes are that conservative. Never above 1: the prediction is the current leg's tube
+        carried elsewhere, and a scale earned by unlearned fields multiplied it too far
+        (scaled by 2.2, bump_mid's far gap shut in 7 of 20 missions); the leg that passes
+        the obstacle is grown by its own calibrated margin when it starts.
+        """
+        if self.calibrated is None:
+            return 1.0
+        scale, _ = self.calibrated.leg_scale(level > 1.0)
+        return 1.0 if scale is None else min(1.0, scale)
 
     def _fallback(self) -> float:
         return self.legs.d_rob_max if self.initial_margin is None else self.initial_margin
