@@ -7,7 +7,9 @@ kept and no random ones, and ``layouts``: narrow_gap's field and route among the
 random obstacles per seed. Per scenario (docs/margins.md §10):
 
 1. a calibration: ``rrtq bench --set safety.margin=learned_bound`` on seeds 100 on, which
-   pools its runs' leg scores into ``calibration-cfg-00.json``;
+   pools its runs' leg scores into ``calibration-cfg-00.json``; then a second round, the
+   same seeds flown by the calibrated policy from that file (``calibration-2``), whose own
+   scores are the calibration of the policy under test;
 2. ``learned_bound`` from that calibration (``safety.calibration``, other seeds than the
    calibration's: 0 on), conformal (the default) and ``safety.conformal=false``;
 3. ``running_max`` on the same seeds.
@@ -198,6 +200,14 @@ def main() -> int:
         bench('calibration', args.calibration_seeds, CALIBRATION_FIRST_SEED,
               ['safety.margin=learned_bound'],
               keep='calibration' in args.keep and calibration.exists())
+        # The second round: the calibration seeds flown by the calibrated policy itself, from
+        # the first round's file; their own scores calibrate the policy that will be tested
+        # (the first round's missions were flown uncalibrated: other routes, other legs).
+        second = (runs / 'calibration-2' / 'calibration-cfg-00.json').resolve()
+        bench('calibration-2', args.calibration_seeds, CALIBRATION_FIRST_SEED,
+              ['safety.margin=learned_bound', f'safety.calibration={calibration}'],
+              keep='calibration' in args.keep and second.exists())
+        calibration = second
 
         pooled = json.loads(calibration.read_text())
         print(f'margins_closed_loop: {name}: calibration of {len(pooled["normalized"])} '
