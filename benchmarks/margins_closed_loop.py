@@ -7,9 +7,9 @@ kept and no random ones, and ``layouts``: narrow_gap's field and route among the
 random obstacles per seed. Per scenario (docs/margins.md §10):
 
 1. a calibration: ``rrtq bench --set safety.margin=learned_bound`` on seeds 100 on, which
-   pools its runs' leg scores into ``calibration-cfg-00.json``; then a second round, the
-   same seeds flown by the calibrated policy from that file (``calibration-2``), whose own
-   scores are the calibration of the policy under test;
+   pools its runs' leg scores into ``calibration-cfg-00.json``; with ``--rounds 2`` a
+   second round, the same seeds flown by the calibrated policy from that file
+   (``calibration-2``), whose own scores are the calibration of the policy under test;
 2. ``learned_bound`` from that calibration (``safety.calibration``, other seeds than the
    calibration's: 0 on), conformal (the default) and ``safety.conformal=false``;
 3. ``running_max`` on the same seeds.
@@ -168,6 +168,9 @@ def main() -> int:
                     help='seeds of the uncalibrated learned_bound and running_max (0 on)')
     ap.add_argument('--calibration-seeds', type=int, default=20,
                     help=f'seeds of the calibration ({CALIBRATION_FIRST_SEED} on)')
+    ap.add_argument('--rounds', type=int, choices=(1, 2), default=1,
+                    help='calibration rounds: 1, the calibration seeds flown without one (what '
+                    'a user\'s first bench gives); 2, then flown again from it')
     ap.add_argument('--workers', type=int, default=os.cpu_count() or 1)
     ap.add_argument('--scenarios', nargs='+', choices=sorted(SCENARIOS), default=list(SCENARIOS))
     ap.add_argument('--runs', type=pathlib.Path, default=ROOT / 'runs' / 'margins_closed_loop')
@@ -200,14 +203,15 @@ def main() -> int:
         bench('calibration', args.calibration_seeds, CALIBRATION_FIRST_SEED,
               ['safety.margin=learned_bound'],
               keep='calibration' in args.keep and calibration.exists())
-        # The second round: the calibration seeds flown by the calibrated policy itself, from
-        # the first round's file; their own scores calibrate the policy that will be tested
-        # (the first round's missions were flown uncalibrated: other routes, other legs).
-        second = (runs / 'calibration-2' / 'calibration-cfg-00.json').resolve()
-        bench('calibration-2', args.calibration_seeds, CALIBRATION_FIRST_SEED,
-              ['safety.margin=learned_bound', f'safety.calibration={calibration}'],
-              keep='calibration' in args.keep and second.exists())
-        calibration = second
+        if args.rounds == 2:
+            # The calibration seeds flown by the calibrated policy itself, from the first
+            # round's file; their own scores calibrate the policy under test (the first
+            # round's missions were flown uncalibrated: other routes, other legs).
+            second = (runs / 'calibration-2' / 'calibration-cfg-00.json').resolve()
+            bench('calibration-2', args.calibration_seeds, CALIBRATION_FIRST_SEED,
+                  ['safety.margin=learned_bound', f'safety.calibration={calibration}'],
+                  keep='calibration' in args.keep and second.exists())
+            calibration = second
 
         pooled = json.loads(calibration.read_text())
         print(f'margins_closed_loop: {name}: calibration of {len(pooled["normalized"])} '

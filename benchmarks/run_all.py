@@ -93,9 +93,10 @@ BENCHMARKS = [
               'The calibrated learned bound (from a calibration pooled from other seeds), the '
               'uncalibrated one and running_max on five scenarios with gaps and disturbance '
               'bumps and on random layouts; coverage checked from the recordings. The '
-              'calibration, uncalibrated and running_max benches ran at d711af1, the '
-              'calibrated rows at e64372f (the change between them only runs with a '
-              'calibration).'),
+              'uncalibrated and running_max benches ran at d711af1 (nothing they run has '
+              'changed since), the calibration at fa6a643 (flown without one: the later '
+              'changes act only with one), the calibrated rows at 24899da, tabulated from '
+              'their recordings at bc2d16b (`--tabulate`).'),
     Benchmark('controller_robustness', 'Controller', 'Random plants from the defaults',
               '40 random plants, 30 legs each, no initial gain, blind to the disturbance: cost '
               'against the true Riccati policy flown through the same disturbance.'),
