@@ -37,10 +37,10 @@ __all__ = ['FORMAT', 'VERSION', 'Calibration', 'read_calibration', 'write_calibr
 
 FORMAT = 'rrtq-margin-calibration'
 VERSION = 3
-_KEYS = {'format', 'version', 'scores', 'normalized', 'refuted', 'prior', 'source', 'created'}
+_LISTS = ('scores', 'normalized', 'refuted', 'prior')
+_KEYS = {'format', 'version', 'source', 'created', *_LISTS}
 _SINCE = {'normalized': 2, 'prior': 2, 'refuted': 3}
 """The version that added each key (a file of an older version holding it is an error)."""
-_LISTS = ('scores', 'normalized', 'refuted', 'prior')
 
 
 @dataclasses.dataclass(frozen=True)
@@ -111,14 +111,14 @@ def read_calibration(path: str | pathlib.Path) -> Calibration:
         raise ValueError(f'{p}: format must be {FORMAT!r}, got {data.get("format")!r}')
     version = data.get('version')
     if isinstance(version, bool) or version not in range(1, VERSION + 1):
-        raise ValueError(f'{p}: version {data.get("version")!r} is not supported '
+        raise ValueError(f'{p}: version {version!r} is not supported '
                          f'(this reader knows version {VERSION})')
     unknown = sorted(set(data) - _KEYS)
     if unknown:
         raise ValueError(f'{p}: unknown key {unknown[0]!r}')
-    newer = sorted(k for k in set(data) & set(_SINCE) if _SINCE[k] > data['version'])
+    newer = sorted(k for k in set(data) & set(_SINCE) if _SINCE[k] > int(version))
     if newer:
-        raise ValueError(f'{p}: unknown key {newer[0]!r} in a version {data["version"]} file')
+        raise ValueError(f'{p}: unknown key {newer[0]!r} in a version {version} file')
     lists = {}
     for key in _LISTS:
         value = data.get(key, [] if key != 'scores' else None)
