@@ -116,7 +116,7 @@ def read_calibration(path: str | pathlib.Path) -> Calibration:
     unknown = sorted(set(data) - _KEYS)
     if unknown:
         raise ValueError(f'{p}: unknown key {unknown[0]!r}')
-    newer = sorted(k for k in set(data) & set(_SINCE) if _SINCE[k] > int(version))
+    newer = sorted(k for k in set(data) & set(_SINCE) if _SINCE[k] > data['version'])
     if newer:
         raise ValueError(f'{p}: unknown key {newer[0]!r} in a version {version} file')
     lists = {}
