@@ -122,10 +122,12 @@ def test_learned_bound_starts_from_a_pooled_calibration_and_writes_its_categorie
         assert min(published) >= at_start - 1e-9
         if tube > 0.0:
             assert abs(at_start - scale * tube) <= 1e-9 * max(1.0, at_start)
-    # Each category's pooled scale, before its own legs.
-    for refuted, pooled in ((False, 0.5), (True, 0.8)):
-        first = next((r for r in with_tube if r[4] == refuted), None)
-        assert first is None or abs(first[2] - pooled) < 1e-9
+    # Each category's pooled scale, before its own legs (this short mission need not meet a
+    # refuted level; a leg on the prior bound it must).
+    on_prior = [r for r in with_tube if not r[4]]
+    assert on_prior and abs(on_prior[0][2] - 0.5) < 1e-9
+    on_refuted = [r for r in with_tube if r[4]]
+    assert not on_refuted or abs(on_refuted[0][2] - 0.8) < 1e-9
     written = json.loads((out / 'calibration.json').read_text())
     assert written['normalized'][:25] == [0.5] * 25 and written['prior'][:25] == [0.3] * 25
     assert written['refuted'][:25] == [0.8] * 25
