@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import solve_discrete_are
+from scipy.stats import norm
 
 Array = NDArray[np.float64]
 
@@ -255,6 +256,43 @@ class Observer:
         push = self.model.equivalent_input(x[same], x[same + 1]) - self._acted[same]
         return push.mean(axis=0), push.std(axis=0, ddof=1) / math.sqrt(len(same))
 
+    def last_push(self, y_next: Array) -> Array | None:
+        """The matched push over the last recorded step, from the state measured after it.
+
+        ŵ_k = Γ⁺ (x̄_{k+1} - Φ x̄_k - Σ_j Γ_j u_{k-j}), N per input: what moved the robot
+        beyond what its forces and its state explain, steady push included (the model's
+        constant column is not taken off). ``y_next`` in the leg coordinates of the last
+        record. None before a model or a first record.
+        """
+        model = self.model
+        if model is None or self.steps == 0:
+            return None
+        last = self.steps - 1
+        forces = np.array([self._u[(last - j) % self.memory] if last - j >= 0
+                           else np.zeros(self.m) for j in range(model.gammas.shape[0])])
+        e = (np.asarray(y_next, dtype=float) - model.phi @ self._y[last % self.memory]
+             - np.einsum('jnm,jm->n', model.gammas, forces))
+        return np.asarray(np.linalg.lstsq(model.gamma, e, rcond=None)[0], dtype=float)
+
+    def push_noise(self, a: float) -> Array:
+        """Standard deviation, from the odometry's noise alone, of :meth:`last_push` low-passed.
+
+        N per input, for the filter y_k = y_{k-1} + a (ŵ_k - y_{k-1}) (:class:`PushCanceller`).
+        ŵ's part from white measurement noise n (covariance R) is P (n_{k+1} - Φ n_k), P = Γ⁺;
+        filtered, with b = 1 - a, it is a P (n_{k+1} + Σ_{j≥1} b^{j-1} (b I - Φ) n_{k+1-j}),
+        of covariance a² P (R + (b I - Φ) R (b I - Φ)ᵀ / (1 - b²)) Pᵀ: the noise enters as
+        a near-difference, which the filter largely cancels. Zeros with exact odometry or
+        before a model.
+        """
+        if self.model is None or not self.noisy:
+            return np.zeros(self.m)
+        R = np.diag(self.variance)
+        P = np.linalg.pinv(self.model.gamma)
+        b = 1.0 - a
+        lead = b * np.eye(self.n) - self.model.phi
+        cov = a * a * P @ (R + lead @ R @ lead.T / (1.0 - b * b)) @ P.T
+        return np.sqrt(np.maximum(np.diag(cov), 0.0))
+
     def acted(self, steps: NDArray[np.int64], known: NDArray[np.bool_]) -> Array:
         """The commanded force that acted over each step (delayed as the model sees it).
 
@@ -331,6 +369,40 @@ class Observer:
             i = starts[live] + k
             smoothed[i] = filtered[i] + (smoothed[i + 1] - predicted[i + 1]) @ C.T
         return smoothed
+
+
+class PushCanceller:
+    """Disturbance-observer feed-forward: the force that cancels the push the model sees.
+
+    A first-order low-pass filter (time constant ``time``, s) of the per-step push
+    :meth:`Observer.last_push`, the classic disturbance observer's Q filter: a push slower
+    than the filter (a slope, a payload, a field the robot stands in, Coulomb friction, a
+    sinusoid of period well beyond 2π ``time``) is estimated with little lag and cancelled,
+    as integral action would cancel it; of a white push the filter passes the slow part,
+    which is what moves the robot. The estimate is made from the force that acted (the
+    saturated one), so saturation does not wind it up. Under odometry noise the filtered
+    estimate carries noise of its own (:meth:`Observer.push_noise`), and each component is
+    shrunk toward zero by z times its standard deviation (soft threshold; z the two-sided
+    normal quantile of ``false_alarm``): a push the noise alone could have made is not
+    cancelled.
+    """
+
+    def __init__(self, m: int, dt: float, time: float, false_alarm: float) -> None:
+        self.a = dt / (time + dt)
+        """The filter's step weight."""
+        self.estimate = np.zeros(m)
+        """N per input: the filtered push (unshrunk)."""
+        self._z = float(norm.ppf(1.0 - false_alarm / 2.0))
+
+    def update(self, push: Array) -> None:
+        """Take one step's push (N per input)."""
+        self.estimate = self.estimate + self.a * (np.asarray(push, dtype=float) - self.estimate)
+
+    def force(self, noise: Array) -> Array:
+        """The feed-forward force: minus the estimate shrunk by z times its ``noise`` (N)."""
+        allowance = self._z * np.asarray(noise, dtype=float)
+        shrunk = np.sign(self.estimate) * np.maximum(np.abs(self.estimate) - allowance, 0.0)
+        return np.asarray(-shrunk, dtype=float)
 
 
 def _lagged(u: Array, lags: int) -> Array:
