@@ -280,9 +280,7 @@ class QLearningController(PolicyIteration):
         tau = self.time_to_go(t)
         e_c1 = e_c2 = 0.0
         if self._prev is not None and self._canceller is not None and self.observer is not None:
-            push = self.observer.last_push(x)   # over the step that just ended, same leg
-            if push is not None and np.all(np.isfinite(push)):
-                self._canceller.update(push)
+            self._canceller.update(self.observer.last_push(x))   # the step that just ended
         if self._prev is not None:
             measured = d_applied is not None and self.q > 0 and self.config.reads_disturbance
             d_prev = np.asarray(d_applied, dtype=float) if measured else self._d_out
