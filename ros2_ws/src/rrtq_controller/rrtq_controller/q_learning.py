@@ -136,6 +136,8 @@ class QLearningController(PolicyIteration):
         per model."""
         self._segment = 0
         """Changes with the leg coordinates (a new leg or horizon): the observer's segments."""
+        self._prev_t = 0.0
+        """s: the time of the step in :attr:`_prev`."""
         self._step_id = -1
         """The observer's id of the step in :attr:`_prev`."""
         self._steady = np.zeros(m)
@@ -279,8 +281,11 @@ class QLearningController(PolicyIteration):
         x = np.array(x_bar, dtype=float)  # a copy: it is kept for the next step
         tau = self.time_to_go(t)
         e_c1 = e_c2 = 0.0
-        if self._prev is not None and self._canceller is not None and self.observer is not None:
-            self._canceller.update(self.observer.last_push(x))   # the step that just ended
+        if (self._prev is not None and self._canceller is not None and self.observer is not None
+                and abs(t - self._prev_t - self.config.dt) < 0.5 * self.config.dt):
+            # the step that just ended, if it was one Δt (a free-running robot side can skip
+            # ticks, and over a gap the model's one step does not hold)
+            self._canceller.update(self.observer.last_push(x))
         if self._prev is not None:
             measured = d_applied is not None and self.q > 0 and self.config.reads_disturbance
             d_prev = np.asarray(d_applied, dtype=float) if measured else self._d_out
@@ -322,6 +327,7 @@ class QLearningController(PolicyIteration):
             self._noise_d = self._probing_d.sample(d_std)
             self._d_out = self._policy_d(phi, x) + self._noise_d
         self._prev = (tau, x, u)  # the applied force: the rows stay right when u saturates
+        self._prev_t = float(t)
         if self.observer is not None:
             self._step_id = self.observer.record(x, u, self._segment)
         events, self._events = self._events, []

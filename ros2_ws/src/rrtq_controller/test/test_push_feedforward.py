@@ -158,5 +158,11 @@ def test_the_controller_reaches_its_target_through_a_steady_push_only_with_the_f
     last = np.array(ends[-4:]).mean()       # the probing (4 N by then) still moves it a little
     if feedforward:
         assert last < 0.1 * 0.7
+        # a skipped tick (a free-running robot side): the step over the gap is not read
+        canceller = ctrl._canceller
+        assert canceller is not None
+        before = canceller.estimate.copy()
+        ctrl.step(t + 3 * DT, x + np.array([0.0, 0.0, 1.0, 0.0]))
+        assert np.array_equal(canceller.estimate, before)
     else:
         assert last == pytest.approx(0.7, abs=0.1)
