@@ -55,12 +55,13 @@ RIDGE = 1e-9
 GAMMA_FALSE_ALARM = 0.01
 """Two-sided rate at which Γ's error exceeds :attr:`OneStepModel.gamma_error`'s allowance."""
 AR_ITERATIONS = 4
-"""Cochrane-Orcutt iterations of :meth:`Observer.identify`, from the last model's AR
-coefficients. Where the forces are a feedback of the state they settle in 2-3 from zero;
-with the push feed-forward the force carries the disturbance's own estimate, least squares
-without the AR part is far off, and from zero they took 6-8 (a 0.2 Hz sinusoid: (1.87,
--0.88) after four against (1.996, -1.000)). More iterations from zero drift on exact data
-(a unit root that filters everything away): each identification goes on from the last."""
+"""Cochrane-Orcutt iterations of :meth:`Observer.identify`, from zero AR coefficients or,
+with ``warm_start``, from the last model's. Where the forces are a feedback of the state
+they settle in 2-3 from zero. With the push feed-forward the force carries the
+disturbance's own estimate, least squares without the AR part is far off, and from zero
+they took 6-8 (a 0.2 Hz sinusoid: (1.87, -0.88) after four against (1.996, -1.000)); more
+iterations from zero drift on exact data (a unit root that filters everything away), so
+there each identification goes on from the last."""
 
 
 @dataclass(frozen=True)
@@ -120,8 +121,12 @@ class Observer:
         p: order of the AR model of the unexplained part of each step.
     """
 
-    def __init__(self, n: int, m: int, lags: int = 3, memory: int = 4000, ar: int = 2) -> None:
+    def __init__(self, n: int, m: int, lags: int = 3, memory: int = 4000, ar: int = 2,
+                 warm_start: bool = False) -> None:
         self.n, self.m, self.lags, self.ar = n, m, lags, ar
+        self.warm_start = warm_start
+        """Whether each identification's AR iterations start from the last model's
+        coefficients (:data:`AR_ITERATIONS`; for a force that carries the push's estimate)."""
         self._y = np.zeros((memory, n))
         self._u = np.zeros((memory, m))
         self._segment = np.zeros(memory, dtype=np.int64)
@@ -185,9 +190,9 @@ class Observer:
         usable[:J] = False                # the lags of the first steps are unknown
         if usable.sum() < 10 * regress.shape[1]:
             return None
-        # from the last model's AR coefficients where it had as many: the iterations go on
-        # from where the last identification left them
-        last = self.model.ar if self.model is not None else np.zeros(0)
+        # with warm_start, from the last model's AR coefficients where it had as many: the
+        # iterations go on from where the last identification left them
+        last = self.model.ar if self.model is not None and self.warm_start else np.zeros(0)
         a = last.copy() if len(last) == p else np.zeros(p)
         for _ in range(AR_ITERATIONS if p else 1):
             w = _least_squares(_ar_filter(regress, a)[usable], _ar_filter(target, a)[usable])

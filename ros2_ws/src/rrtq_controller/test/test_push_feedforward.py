@@ -144,6 +144,7 @@ def test_the_controller_reaches_its_target_through_a_steady_push_only_with_the_f
     plant = ref.Plant(A, B, DT, G)
     cfg = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=tuple(map(tuple, K)),
                            actor_warmup_legs=10**6, push_feedforward=feedforward)
+    assert ControllerConfig().push_feedforward is False      # experimental: off by default
     ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(0))
     t, v = 0.0, np.zeros(2)
     ends = []
