@@ -190,15 +190,15 @@ class Observer:
         usable[:J] = False                # the lags of the first steps are unknown
         if usable.sum() < 10 * regress.shape[1]:
             return None
-        # with warm_start, from the last model's AR coefficients where it had as many: the
-        # iterations go on from where the last identification left them
+        # from zero AR coefficients and, with warm_start, also from the last model's where it
+        # had as many (the iterations go on from where the last identification left them):
+        # the fit of the larger likelihood
+        starts = [np.zeros(p)]
         last = self.model.ar if self.model is not None and self.warm_start else np.zeros(0)
-        a = last.copy() if len(last) == p else np.zeros(p)
-        for _ in range(AR_ITERATIONS if p else 1):
-            w = _least_squares(_ar_filter(regress, a)[usable], _ar_filter(target, a)[usable])
-            if not p:
-                break
-            a = _ar_coefficients(target - regress @ w, usable, p)
+        if p and len(last) == p and np.all(np.isfinite(last)) and np.any(last):
+            starts.append(last.copy())
+        fits = [_cochrane_orcutt(regress, target, usable, p, a) for a in starts]
+        w, a, _ = min(fits, key=lambda fit: fit[2])
         if not np.all(np.isfinite(w)):
             return None                   # no model in data that cannot give one
         e = (target - regress[:, :-1] @ w[:-1])[same]     # the steady push included
@@ -477,6 +477,26 @@ def _least_squares(regress: Array, target: Array) -> Array:
     return np.asarray(w / scale[:, None], dtype=float)
 
 
+def _cochrane_orcutt(regress: Array, target: Array, usable: NDArray[np.bool_], p: int,
+                     a: Array) -> tuple[Array, Array, float]:
+    """(W, AR coefficients, -2 log-likelihood per transition) of :data:`AR_ITERATIONS` from ``a``.
+
+    The likelihood is Gaussian with a variance of its own per state component (the
+    innovations of the last W and AR coefficients): scale-free, so positions and
+    velocities weigh alike; inf where the fit is not finite.
+    """
+    for _ in range(AR_ITERATIONS if p else 1):
+        w = _least_squares(_ar_filter(regress, a)[usable], _ar_filter(target, a)[usable])
+        if not p:
+            break
+        a = _ar_coefficients(target - regress @ w, usable, p)
+    innovations = _ar_filter(target - regress @ w, a)[usable]
+    power = np.mean(innovations ** 2, axis=0)
+    if not (np.all(np.isfinite(w)) and np.all(np.isfinite(power))):
+        return w, a, math.inf
+    return w, a, float(np.sum(np.log(np.maximum(power, 1e-300))))
+
+
 def _ar_filter(z: Array, a: Array) -> Array:
     """z_k - Σ_i a_i z_{k-i} (the first rows are dropped by the caller's mask)."""
     out = z.copy()
@@ -495,7 +515,15 @@ def _ar_coefficients(e: Array, usable: NDArray[np.bool_], p: int) -> Array:
     lags = np.stack([np.vstack([np.zeros((i, r.shape[1])), r[:-i]]) for i in range(1, p + 1)],
                     axis=-1)[usable]
     gram = np.einsum('kip,kiq->pq', lags, lags)
-    a = np.linalg.solve(gram + 1e-9 * np.eye(p), np.einsum('kip,ki->p', lags, r[usable]))
+    rhs = np.einsum('kip,ki->p', lags, r[usable])
+    if not (np.all(np.isfinite(gram)) and np.all(np.isfinite(rhs))):
+        return np.zeros(p)
+    try:
+        a = np.linalg.solve(gram + 1e-9 * np.eye(p), rhs)
+    except np.linalg.LinAlgError:
+        # residuals of a wild fit (a unit-root filter from a warm start, seen on the MuJoCo
+        # plant at mu = 0.3) made the lags collinear, and the controller node failed
+        a = np.linalg.lstsq(gram + 1e-9 * np.eye(p), rhs, rcond=None)[0]
     return np.asarray(a, dtype=float) if np.all(np.isfinite(a)) else np.zeros(p)
 
 
