@@ -108,7 +108,9 @@ BENCHMARKS = [
               'cost against the optimum and the Riccati policy.'),
     Benchmark('robot_side', 'Controller', 'The robot side blind to its disturbance',
               'Twelve rows of disturbances, plants, odometry noise and actuation delay, the '
-              'robot reading only its odometry, commands and perception.'),
+              'robot reading only its odometry, commands and perception. Six of the rows with '
+              'the experimental push feed-forward on (`controller.push_feedforward`, '
+              'docs/observer.md §6): results/robot_side_push_feedforward.md.'),
     Benchmark('physical_plant', 'Bring your own robot', 'MuJoCo plant and laser scan',
               'The MuJoCo plant at three Coulomb frictions, and scan against polygon '
               'perception.'),

@@ -193,6 +193,19 @@ class ControllerConfig:
     not measure its disturbance can play against the equivalent input disturbance its
     observer identifies (:meth:`rrtq_controller.observer.Observer.acted`): m components, in
     the units of the forces, entering where the forces do (a matched disturbance)."""
+    push_feedforward: bool = setting(False, doc='nominal variant with the observer: add to '
+                                     'the policy\'s force the force that cancels the push '
+                                     'the observer sees, low-pass filtered (a disturbance '
+                                     'observer; push_filter_time); experimental, off by '
+                                     'default')
+    """Integral action, model-free toward the plant: without it a steady push F_d (a field, a
+    slope, Coulomb friction) holds a robot F_d / K_p short of its waypoint, and a slow
+    sinusoid moves it by what the feedback alone leaves. Off by default: a model identified
+    mostly while the brake held the robot against a gust read a 575 N push that was not
+    there (docs/observer.md §6)."""
+    push_filter_time: float = setting(0.25, low=0.0, low_open=True, unit='s',
+                                      doc='push_feedforward: time constant of the low-pass '
+                                      'filter of the push')
     observer_lags: int = setting(3, low=0, doc='observer: input lags of the one-step model '
                                  '(steps); an actuation delay of up to this many steps is '
                                  'identified')
@@ -326,6 +339,11 @@ class ControllerConfig:
         """
         return ((self.variant is Variant.ROBUST and not self.disturbance_estimate)
                 or (self.variant is Variant.NOMINAL and self.measured_disturbance))
+
+    @property
+    def cancels_push(self) -> bool:
+        """Whether the policy's force carries the push feed-forward (nominal, observing)."""
+        return self.push_feedforward and self.observes and self.variant is Variant.NOMINAL
 
     @property
     def observes(self) -> bool:

@@ -30,8 +30,8 @@ from numpy.typing import NDArray
 from .basis import QuadraticBasis, TimeBasis
 from .config import ActorLaw, ControllerConfig, StepInfo, Variant
 from .critic import LeastSquaresCritic, make_critic
-from .guard import Brake, DivergenceWatch, KeepOff, PolicyEvent, Sensing, face_ahead
-from .observer import Observer
+from .guard import FALSE_ALARM, Brake, DivergenceWatch, KeepOff, PolicyEvent, Sensing, face_ahead
+from .observer import Observer, PushCanceller
 from .policy_iteration import PolicyIteration
 from .probing import Probing
 from .readout import _features
@@ -124,15 +124,21 @@ class QLearningController(PolicyIteration):
         self.leg_index = -1
         self._t0 = 0.0
         self._prev: tuple[float, Array, Array] | None = None
-        self.observer = (Observer(n, m, c.observer_lags, c.observer_memory, c.observer_ar)
+        self.observer = (Observer(n, m, c.observer_lags, c.observer_memory, c.observer_ar,
+                                  warm_start=c.cancels_push)
                          if c.observes else None)
         """The one-step model the critic learns through (:mod:`observer`); None: the rows take
         the odometry and the commanded force as they are."""
+        self._canceller = (PushCanceller(m, c.dt, c.push_filter_time, FALSE_ALARM)
+                           if c.cancels_push else None)
+        """The disturbance-observer feed-forward (``push_feedforward``); None: off."""
         self._rollout_of = None
         """The guard's rollouts of the observer's current model (:mod:`rollout`), built once
         per model."""
         self._segment = 0
         """Changes with the leg coordinates (a new leg or horizon): the observer's segments."""
+        self._prev_t = 0.0
+        """s: the time of the step in :attr:`_prev`."""
         self._step_id = -1
         """The observer's id of the step in :attr:`_prev`."""
         self._steady = np.zeros(m)
@@ -276,6 +282,11 @@ class QLearningController(PolicyIteration):
         x = np.array(x_bar, dtype=float)  # a copy: it is kept for the next step
         tau = self.time_to_go(t)
         e_c1 = e_c2 = 0.0
+        if (self._prev is not None and self._canceller is not None and self.observer is not None
+                and abs(t - self._prev_t - self.config.dt) < 0.5 * self.config.dt):
+            # the step that just ended, if it was one Δt (a free-running robot side can skip
+            # ticks, and over a gap the model's one step does not hold)
+            self._canceller.update(self.observer.last_push(x))
         if self._prev is not None:
             measured = d_applied is not None and self.q > 0 and self.config.reads_disturbance
             d_prev = np.asarray(d_applied, dtype=float) if measured else self._d_out
@@ -295,18 +306,21 @@ class QLearningController(PolicyIteration):
                 self._completed is not None or self._t0 > self._brake_started)):
             self._braking = False   # at rest: a policy that completed a leg, or a new leg
             self._watch.start(x)    # watched afresh from where it stopped (it trips once a leg)
+        feedforward = np.zeros(self.m)
+        if self._canceller is not None and self.observer is not None:
+            feedforward = self._canceller.force(self.observer.push_noise(self._canceller.a))
         if self._braking:
             noise = np.zeros(self.m)
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
-            u = np.clip(self._policy_u(phi, x) + noise, -limit, limit)
+            u = np.clip(self._policy_u(phi, x) + noise + feedforward, -limit, limit)
         velocity = x[2:2 + self.m]
         obstacles = (nearest, None if ahead is None else face_ahead(*ahead, velocity))
         for keep, obstacle in zip((self._keep_off, self._keep_ahead), obstacles, strict=True):
             if obstacle is not None and x.size >= 2 + self.m:   # it acts within its reach only
                 u = np.clip(keep(u, velocity, obstacle[0], obstacle[1],
                                  lambda: self._force_scale(self.critic.window.applied()),
-                                 self._steady), -limit, limit)
+                                 self._steady + feedforward), -limit, limit)
             else:
                 keep.release()
         if self.robust:
@@ -314,6 +328,7 @@ class QLearningController(PolicyIteration):
             self._noise_d = self._probing_d.sample(d_std)
             self._d_out = self._policy_d(phi, x) + self._noise_d
         self._prev = (tau, x, u)  # the applied force: the rows stay right when u saturates
+        self._prev_t = float(t)
         if self.observer is not None:
             self._step_id = self.observer.record(x, u, self._segment)
         events, self._events = self._events, []

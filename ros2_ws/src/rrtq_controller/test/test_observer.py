@@ -185,3 +185,27 @@ def test_a_robot_that_does_not_move_gives_no_model_and_no_error():
                                     np.zeros(600, dtype=np.int64))
     assert model is None or (np.all(np.isfinite(model.phi)) and np.all(np.isfinite(model.gamma))
                              and np.abs(model.gamma).max() < 1e-9)   # forces moved nothing
+
+
+def test_a_singular_ar_fit_falls_back_to_least_squares(monkeypatch):
+    # Seen with the push feed-forward on the MuJoCo plant at mu = 0.3: a warm start from a
+    # unit-root AR fit gave residuals of 6e9, collinear lags, a singular Gram, and
+    # np.linalg.solve's LinAlgError ended the run as node_failed. The AR fit falls back to
+    # least squares (here solve is made to fail as it did there).
+    import rrtq_controller.observer as observer_module
+
+    rng = np.random.default_rng(0)
+    e = np.zeros((500, 4))
+    for k in range(2, 500):                  # an AR(2) process of known coefficients
+        e[k] = 1.2 * e[k - 1] - 0.5 * e[k - 2] + rng.standard_normal(4)
+    usable = np.ones(500, dtype=bool)
+    usable[:2] = False
+    expected = observer_module._ar_coefficients(e, usable, 2)
+
+    def singular(*_args, **_kwargs):
+        raise np.linalg.LinAlgError('Singular matrix')
+
+    monkeypatch.setattr(observer_module.np.linalg, 'solve', singular)
+    fallback = observer_module._ar_coefficients(e, usable, 2)
+    assert np.allclose(fallback, expected, atol=1e-9)
+    assert fallback == pytest.approx([1.2, -0.5], abs=0.1)

@@ -164,8 +164,10 @@ def _policy_value_kernel(A, B, K, R, T):
     return lambda tau: sol.sol(tau).reshape(n, n)
 
 
+@pytest.mark.parametrize('feedforward', [False, True])
 @pytest.mark.parametrize('disturbance', ['none', 'white', 'sinusoid'])
-def test_the_critic_evaluates_a_known_policy_under_noise_it_does_not_measure(disturbance):
+def test_the_critic_evaluates_a_known_policy_under_noise_it_does_not_measure(disturbance,
+                                                                             feedforward):
     """Policy evaluation from rows with an unmeasured disturbance, against the known P^K(τ).
 
     The actor is held at a PD gain K; 12 legs of a whole horizon each on the rover without
@@ -174,7 +176,8 @@ def test_the_critic_evaluates_a_known_policy_under_noise_it_does_not_measure(dis
     the actor's policy is within 5 % of the true P^K(τ) on τ in [T/2, T] (where the legs
     carry it); the rows as the papers form them, with the disturbance missing, are off by
     more than 25 % (errors in variables and an unmodelled input: least squares is biased
-    however much data it gets).
+    however much data it gets). With the push feed-forward (docs/observer.md §6) the force
+    carries the push's estimate, and the rows, of the force that acted, stay exact.
     """
     A, B = ref.rover(stiffness=0.0)
     R, F = 0.02 * np.eye(2), ref.MAXWELL_SLIP_F
@@ -184,7 +187,8 @@ def test_the_critic_evaluates_a_known_policy_under_noise_it_does_not_measure(dis
     errors = {}
     for observer in (True, False):
         cfg = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=PD,
-                               actor_warmup_legs=10**6, observer=observer)
+                               actor_warmup_legs=10**6, observer=observer,
+                               push_feedforward=feedforward)
         ctrl = QLearningController(cfg, 4, 2, 1, np.random.default_rng(0))
         rng = np.random.default_rng(5)
         t, v = 0.0, np.zeros(2)

@@ -48,7 +48,8 @@ _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
     'probing_line_fraction', 'force_limit', 'measured_disturbance', 'observer',
-    'disturbance_estimate', 'rollout_test', 'model', 'vf_lpc',
+    'disturbance_estimate', 'rollout_test', 'push_feedforward', 'push_filter_time', 'model',
+    'vf_lpc',
 )  # fmt: skip
 # planner key -> the settings dataclass it belongs to
 _PLANNER_KEYS: dict[str, type] = {
@@ -276,7 +277,7 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
         gain = tuple(tuple(float(v) for v in row) for row in matrix)
     numbers = {name: r.setting(data, name, ControllerConfig, key)
                for name in ('alpha_c', 'alpha_a', 'alpha_d', 'rho', 'probing_std',
-                            'probing_decay')}
+                            'probing_decay', 'push_filter_time')}
     numbers['probing_line_fraction'] = r.setting(data, 'probing_line_fraction', ControllerConfig,
                                                  key, allow_inf=True)
     # the actuator's limit is the user's specification; by default the plant's
@@ -292,7 +293,7 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
         **{name: r.boolean(data.get(name, field_default(ControllerConfig, name)),
                            f'controller.{name}')
            for name in ('measured_disturbance', 'observer', 'disturbance_estimate',
-                        'rollout_test')},
+                        'rollout_test', 'push_feedforward')},
         **weights, **numbers)
 
 
