@@ -450,14 +450,17 @@ def _gamma_error(regress: Array, target: Array, w: Array, n: int, m: int, lags: 
     ridge = RIDGE * len(z)
     eig, vec = np.linalg.eigh(z.T @ z)
     ridge_share = float(ridge / (max(eig.min(), 0.0) + ridge))
-    inverse = (vec / (np.maximum(eig, 0.0) + ridge)) @ vec.T / np.outer(scale, scale)
-    dof = max(len(z) - len(w), 1)
-    sigma2 = np.sum((target - regress @ w) ** 2, axis=0) / dof      # per state component
     # Γ = Σ_j Γ_j: the sum over the lag columns of each input
     pick = np.zeros((len(w), m))
     for j in range(lags + 1):
         pick[n + j * m + np.arange(m), np.arange(m)] = 1.0
-    spread = np.diag(pick.T @ inverse @ pick)                          # per input
+    with np.errstate(all='ignore'):      # a column that never moved: its scale is ~1e-300
+        inverse = (vec / (np.maximum(eig, 0.0) + ridge)) @ vec.T / np.outer(scale, scale)
+        spread = np.diag(pick.T @ inverse @ pick)                      # per input
+    dof = max(len(z) - len(w), 1)
+    sigma2 = np.sum((target - regress @ w) ** 2, axis=0) / dof      # per state component
+    if not (np.all(np.isfinite(spread)) and np.all(np.isfinite(sigma2))):
+        return math.inf
     se = math.sqrt(float(np.sum(np.outer(sigma2, spread))))
     gamma = (pick.T @ w).T
     smallest = float(np.linalg.svd(gamma, compute_uv=False).min()) if np.all(
