@@ -56,7 +56,7 @@ GAMMA_FALSE_ALARM = 0.01
 """Two-sided rate at which Γ's error exceeds :attr:`OneStepModel.gamma_error`'s allowance."""
 AR_ITERATIONS = 4
 """Cochrane-Orcutt iterations of :meth:`Observer.identify`, from zero AR coefficients or,
-with ``warm_start``, from the last model's. Where the forces are a feedback of the state
+with ``reads_pushes``, from the last model's. Where the forces are a feedback of the state
 they settle in 2-3 from zero. With the push feed-forward the force carries the
 disturbance's own estimate, least squares without the AR part is far off, and from zero
 they took 6-8 (a 0.2 Hz sinusoid: (1.87, -0.88) after four against (1.996, -1.000)); more
@@ -76,8 +76,9 @@ class OneStepModel:
     """a_1..a_p of e_k = Σ a_i e_{k-i} + ε_k (common to every state component)."""
     residual_cov: Array
     """(n x n): covariance of e, the part of a step the forces and the state do not explain."""
-    gamma_error: float = 0.0
-    """How far Γ may be off, relative: z ‖SE(Γ)‖_F / σ_min(Γ) (z at :data:`GAMMA_FALSE_ALARM`,
+    gamma_error: float = math.inf
+    """How far Γ may be off, relative (assessed only for an observer that ``reads_pushes``;
+    inf: not assessed, no push is read through the model): z ‖SE(Γ)‖_F / σ_min(Γ) (z at :data:`GAMMA_FALSE_ALARM`,
     SE from the fit's covariance) plus the share by which the ridge shrinks the least
     determined direction of the regression, λ / (s_min + λ) (1 where the data do not
     determine the model: forces that only ever were a feedback of the state). A
@@ -122,11 +123,14 @@ class Observer:
     """
 
     def __init__(self, n: int, m: int, lags: int = 3, memory: int = 4000, ar: int = 2,
-                 warm_start: bool = False) -> None:
+                 reads_pushes: bool = False) -> None:
         self.n, self.m, self.lags, self.ar = n, m, lags, ar
-        self.warm_start = warm_start
-        """Whether each identification's AR iterations start from the last model's
-        coefficients (:data:`AR_ITERATIONS`; for a force that carries the push's estimate)."""
+        self.reads_pushes = reads_pushes
+        """Whether pushes are read through its models (:meth:`last_push`, the push
+        feed-forward, whose forces then carry the push's estimate): each identification's AR
+        iterations also start from the last model's coefficients (:data:`AR_ITERATIONS`) and
+        the model carries its :attr:`OneStepModel.gamma_error`; neither costs the
+        identification anything otherwise."""
         self._y = np.zeros((memory, n))
         self._u = np.zeros((memory, m))
         self._segment = np.zeros(memory, dtype=np.int64)
@@ -190,11 +194,11 @@ class Observer:
         usable[:J] = False                # the lags of the first steps are unknown
         if usable.sum() < 10 * regress.shape[1]:
             return None
-        # from zero AR coefficients and, with warm_start, also from the last model's where it
+        # from zero AR coefficients and, with reads_pushes, also from the last model's where it
         # had as many (the iterations go on from where the last identification left them):
         # the fit of the larger likelihood
         starts = [np.zeros(p)]
-        last = self.model.ar if self.model is not None and self.warm_start else np.zeros(0)
+        last = self.model.ar if self.model is not None and self.reads_pushes else np.zeros(0)
         if p and len(last) == p and np.all(np.isfinite(last)) and np.any(last):
             starts.append(last.copy())
         fits = [_cochrane_orcutt(regress, target, usable, p, a) for a in starts]
@@ -203,10 +207,10 @@ class Observer:
             return None                   # no model in data that cannot give one
         e = (target - regress[:, :-1] @ w[:-1])[same]     # the steady push included
         gammas = w[n:-1].reshape(J + 1, m, n).transpose(0, 2, 1)
+        error = (_gamma_error(_ar_filter(regress, a)[usable], _ar_filter(target, a)[usable], w,
+                              n, m, J) if self.reads_pushes else math.inf)
         return OneStepModel(phi=w[:n].T.copy(), gammas=gammas, ar=a,
-                            residual_cov=np.atleast_2d(np.cov(e.T)),
-                            gamma_error=_gamma_error(_ar_filter(regress, a)[usable],
-                                                     _ar_filter(target, a)[usable], w, n, m, J))
+                            residual_cov=np.atleast_2d(np.cov(e.T)), gamma_error=error)
 
     def update(self) -> bool:
         """Identify the model from the kept steps; smooth the states with it if odometry is noisy.

@@ -125,7 +125,7 @@ class QLearningController(PolicyIteration):
         self._t0 = 0.0
         self._prev: tuple[float, Array, Array] | None = None
         self.observer = (Observer(n, m, c.observer_lags, c.observer_memory, c.observer_ar,
-                                  warm_start=c.cancels_push)
+                                  reads_pushes=c.cancels_push)
                          if c.observes else None)
         """The one-step model the critic learns through (:mod:`observer`); None: the rows take
         the odometry and the commanded force as they are."""

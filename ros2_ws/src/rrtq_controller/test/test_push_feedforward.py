@@ -38,7 +38,7 @@ def _fly(kind: str, *, cancel: bool, delay: int = 0, noise: tuple[float, float] 
     A, B = ref.rover(MASS, 0.0, 45.0)
     plant = ref.Plant(A, B, DT, F)
     rng = np.random.default_rng(seed)
-    observer = Observer(4, 2, lags=3, memory=4000)
+    observer = Observer(4, 2, lags=3, memory=4000, reads_pushes=True)
     observer.variance = np.array([noise[0] ** 2] * 2 + [noise[1] ** 2] * 2)
     canceller = PushCanceller(2, DT, 0.25, FALSE_ALARM)
     pending = [np.zeros(2)] * delay
@@ -121,8 +121,28 @@ def test_under_odometry_noise_a_steady_push_is_cancelled_in_part():
     assert np.abs(held[-200:, :2].mean(axis=0)).max() < np.abs(without[-200:, :2].mean(axis=0)).min()
 
 
+def test_an_observer_that_does_not_read_pushes_reads_none_and_does_not_assess_its_model():
+    """The defaults (no feed-forward): the model is identified as before, without the cost of
+    its Γ's error, and no push is read through it."""
+    A, B = ref.rover(MASS, 0.0, 45.0)
+    plant = ref.Plant(A, B, DT, F)
+    rng = np.random.default_rng(0)
+    plain, reading = Observer(4, 2), Observer(4, 2, reads_pushes=True)
+    x = np.zeros(4)
+    for k in range(600):
+        u = -K @ x + 20.0 * rng.standard_normal(2)
+        plain.record(x, u, k // 200), reading.record(x, u, k // 200)
+        x = plant.step(x, u, np.array([0.0]))
+    assert plain.update() and reading.update()
+    assert plain.model is not None and reading.model is not None
+    assert np.array_equal(plain.model.phi, reading.model.phi)
+    assert plain.model.gamma_error == np.inf and reading.model.gamma_error < 1.0
+    assert plain.last_push(x) is None
+    assert reading.last_push(x) == pytest.approx(np.zeros(2), abs=1e-4)   # N, of 20 N forces
+
+
 def test_no_model_no_push():
-    observer = Observer(4, 2)
+    observer = Observer(4, 2, reads_pushes=True)
     assert observer.last_push(np.zeros(4)) is None
     assert np.array_equal(observer.push_noise(0.2), np.zeros(2))
     canceller = PushCanceller(2, DT, 0.25, FALSE_ALARM)
