@@ -13,6 +13,7 @@ import pathlib
 import subprocess
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
@@ -43,9 +44,16 @@ obstacles:
 """
 
 
-def test_a_robot_pushed_toward_a_wall_reaches_its_goal_with_its_disc_inside_the_bounds(tmp_path):
+@pytest.mark.parametrize('feedforward', [False, True])
+def test_a_robot_pushed_toward_a_wall_reaches_its_goal_with_its_disc_inside_the_bounds(
+        tmp_path, feedforward):
+    """Also with the experimental push feed-forward: the brake holds the robot against the
+    gust early on, and a model identified across that hold (before braked steps were kept
+    out of the identification) took a 256 N/m spring the rover has not, read a 580 N push
+    at rest, and the deviation it caused closed the gap (the goal missed at 90 s)."""
     path = tmp_path / 'wall.yaml'
-    path.write_text(WALL)
+    path.write_text(WALL.replace('  probing_std: 5.0\n', f'  probing_std: 5.0\n  push_feedforward: '
+                                 f'{str(feedforward).lower()}\n'))
     out = tmp_path / 'run'
     proc = subprocess.run([str(ROOT / 'scripts/rrtq'), 'run', str(path), '--out', str(out),
                            '--mode', 'composed'], capture_output=True, text=True, timeout=400)

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import solve_discrete_are
+from scipy.signal import lfilter
 from scipy.stats import norm
 
 Array = NDArray[np.float64]
@@ -134,6 +135,7 @@ class Observer:
         self._y = np.zeros((memory, n))
         self._u = np.zeros((memory, m))
         self._segment = np.zeros(memory, dtype=np.int64)
+        self._fits = np.ones(memory, dtype=bool)
         self.steps = 0
         """Steps recorded since the start (the id of the next one)."""
         self.variance = np.zeros(n)
@@ -150,14 +152,16 @@ class Observer:
         """Steps kept."""
         return len(self._y)
 
-    def record(self, y: Array, u: Array, segment: int) -> int:
+    def record(self, y: Array, u: Array, segment: int, fits: bool = True) -> int:
         """Log the measured state y (leg coordinates) and the force commanded after it.
 
         ``segment`` changes whenever the leg coordinates do (a new leg or horizon): a
-        transition is learned only within one. Returns the step's id.
+        transition is learned only within one. ``fits``: whether the model may be
+        identified from the transition this step begins (it is smoothed, estimated and read
+        all the same). Returns the step's id.
         """
         i = self.steps % self.memory
-        self._y[i], self._u[i], self._segment[i] = y, u, segment
+        self._y[i], self._u[i], self._segment[i], self._fits[i] = y, u, segment, fits
         self.steps += 1
         return self.steps - 1
 
@@ -170,13 +174,15 @@ class Observer:
 
     # ------------------------------------------------------------ identification
     def identify(self, x: Array, u: Array, segment: NDArray[np.int64],
-                 ar: int | None = None) -> OneStepModel | None:
+                 ar: int | None = None, fits: NDArray[np.bool_] | None = None
+                 ) -> OneStepModel | None:
         """The one-step model from states x (raw or smoothed) and forces u in time order.
 
         Least squares of x̄_{k+1} on (x̄_k, u_k, ..., u_{k-J}) over the transitions within
         a segment, with e AR(p)-filtered out (Cochrane-Orcutt, :data:`AR_ITERATIONS`
         times); regressors standardised so that forces (N) and states (m) are alike.
-        None when there are fewer than ten transitions per unknown. ``ar``: p, by default
+        None when there are fewer than ten transitions per unknown. ``fits``: per step, whether
+        the transition it begins may be used (with the p before it), all by default. ``ar``: p, by default
         the observer's.
         """
         n, m, J = self.n, self.m, self.lags
@@ -192,6 +198,12 @@ class Observer:
             usable[i:] &= same[:-i] & (segment[1 + i:] == segment[1:-i])
             usable[:i] = False
         usable[:J] = False                # the lags of the first steps are unknown
+        if fits is not None:              # and none of them kept out (Observer.record)
+            fitted = fits[:-1].copy()
+            for i in range(1, p + 1):
+                fitted[i:] &= fits[:-1][:-i]
+            usable &= fitted
+            same = same & fitted
         if usable.sum() < 10 * regress.shape[1]:
             return None
         # from zero AR coefficients and, with reads_pushes, also from the last model's where it
@@ -224,13 +236,14 @@ class Observer:
         y, u, segment, first = self._ordered()
         if len(y) < self.lags + self.ar + 2:
             return self.model is not None
-        model = self.identify(y, u, segment, ar=0 if self.noisy else None)
+        fits = self._fits[(np.arange(len(y)) + first) % self.memory]
+        model = self.identify(y, u, segment, ar=0 if self.noisy else None, fits=fits)
         if model is None or not _invertible(model.gamma):
             return self.model is not None
         if self.noisy:
             refined = self.identify(
                 self._smooth(model, self._process_noise(model, y, u, segment), y, u, segment),
-                u, segment)
+                u, segment, fits=fits)
             if refined is not None and _invertible(refined.gamma):
                 model = refined
         self.model = model
@@ -305,6 +318,22 @@ class Observer:
         e = (np.asarray(y_next, dtype=float) - model.phi @ self._y[last % self.memory]
              - np.einsum('jnm,jm->n', model.gammas, forces))
         return np.asarray(np.linalg.lstsq(model.gamma, e, rcond=None)[0], dtype=float)
+
+    def pushes(self) -> tuple[Array, NDArray[np.int64]] | None:
+        """The matched push of every kept transition within a segment, read as :meth:`last_push` reads.
+
+        From the raw odometry through the current model (N per input, in time order), with
+        each transition's step id; None where :meth:`last_push` would read none. What
+        :meth:`PushCanceller.fit` learns to predict the next push from.
+        """
+        model = self.model
+        if model is None or not model.gamma_error < 1.0:
+            return None
+        y, u, segment, first = self._ordered()
+        e = y[1:] - y[:-1] @ model.phi.T - model.forced(u)[:-1]
+        same = np.flatnonzero(segment[1:] == segment[:-1])
+        push = np.linalg.lstsq(model.gamma, e[same].T, rcond=None)[0].T
+        return np.asarray(push, dtype=float), same + first
 
     def push_noise(self, a: float) -> Array:
         """Standard deviation, from the odometry's noise alone, of :meth:`last_push` low-passed.
@@ -404,26 +433,37 @@ class Observer:
 
 
 class PushCanceller:
-    """Disturbance-observer feed-forward: the force that cancels the push the model sees.
+    """Disturbance-observer feed-forward: the force that cancels the push the robot can expect.
 
     A first-order low-pass filter (time constant ``time``, s) of the per-step push
-    :meth:`Observer.last_push`, the classic disturbance observer's Q filter: a push slower
-    than the filter (a slope, a payload, a field the robot stands in, Coulomb friction, a
-    sinusoid of period well beyond 2π ``time``) is estimated with little lag and cancelled,
-    as integral action would cancel it; of a white push the filter passes the slow part,
-    which is what moves the robot. The estimate is made from the force that acted (the
-    saturated one), so saturation does not wind it up. Under odometry noise the filtered
-    estimate carries noise of its own (:meth:`Observer.push_noise`), and each component is
-    shrunk toward zero by z times its standard deviation (soft threshold; z the two-sided
-    normal quantile of ``false_alarm``): a push the noise alone could have made is not
-    cancelled.
+    :meth:`Observer.last_push`, the classic disturbance observer's Q filter, y_k. The
+    feed-forward cancels not y_k itself but the best linear prediction from it of the push
+    that the force commanded now will meet, ŵ = α + β y_k (:meth:`fit`: least squares of
+    the push ``lead`` steps on, the model's actuation delay plus one, on y over the
+    observer's memory; certainty equivalence: against the part of a push that cannot be
+    predicted the policy is already the best one, and force spent on it is spent for
+    nothing). A push slower than the filter (a slope, a payload, a field the robot stands
+    in, a sinusoid of period well beyond 2π ``time``) gives β near 1 and is cancelled as
+    integral action would cancel it; a white push gives β near 0 and only its mean α is
+    cancelled. α and β are each kept only where they differ from zero at the two-sided
+    rate ``false_alarm``, and β is kept within [0, 1] (below 0 the filter sees the
+    odometry's noise, not a push; beyond 1 the loop would amplify). The estimate is made
+    from the force that acted (the saturated one), so saturation does not wind it up.
+    Under odometry noise y carries noise of its own (:meth:`Observer.push_noise`), and each
+    component of the prediction is shrunk toward zero by z β times its standard deviation
+    (soft threshold; z the two-sided normal quantile of ``false_alarm``). Before a first
+    :meth:`fit` it predicts nothing (α = β = 0).
     """
 
     def __init__(self, m: int, dt: float, time: float, false_alarm: float) -> None:
         self.a = dt / (time + dt)
         """The filter's step weight."""
         self.estimate = np.zeros(m)
-        """N per input: the filtered push (unshrunk)."""
+        """N per input: the filtered push y (unshrunk)."""
+        self.alpha = np.zeros(m)
+        """N per input: the mean of the push the prediction expects (:meth:`fit`)."""
+        self.beta = np.zeros(m)
+        """Per input: the weight of the filtered push in the prediction (:meth:`fit`)."""
         self._z = float(norm.ppf(1.0 - false_alarm / 2.0))
 
     def update(self, push: Array | None) -> None:
@@ -433,10 +473,56 @@ class PushCanceller:
             return
         self.estimate = self.estimate + self.a * (np.asarray(push, dtype=float) - self.estimate)
 
+    def fit(self, reads: tuple[Array, NDArray[np.int64]] | None, lead: int) -> None:
+        """α, β from the pushes read over the observer's memory (:meth:`Observer.pushes`).
+
+        The reads are filtered in order as :meth:`update` filters them, and the read ``lead``
+        steps after each filtered value is regressed on it (ordinary least squares with an
+        intercept, per input), over the pairs whose steps are that far apart. None (no
+        model) or too few pairs: α = β = 0.
+        """
+        m = len(self.alpha)
+        self.alpha, self.beta = np.zeros(m), np.zeros(m)
+        if reads is None:
+            return
+        push, steps = reads
+        if len(push) < 3:
+            return
+        y = lfilter([self.a], [1.0, self.a - 1.0], push, axis=0)
+        later = np.searchsorted(steps, steps + lead)
+        pair = later < len(steps)
+        pair[pair] = steps[later[pair]] == steps[pair] + lead
+        if pair.sum() < 20:
+            return
+        x, target = y[pair], push[later[pair]]
+        count = len(x)
+        xm, tm = x.mean(axis=0), target.mean(axis=0)
+        sxx = np.sum((x - xm) ** 2, axis=0)
+        sxt = np.sum((x - xm) * (target - tm), axis=0)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            beta = np.where(sxx > 0.0, sxt / sxx, 0.0)
+            alpha = tm - beta * xm
+            s2 = np.sum((target - alpha - beta * x) ** 2, axis=0) / max(count - 2, 1)
+            se_beta = np.sqrt(s2 / sxx)
+            se_alpha = np.sqrt(s2 * (1.0 / count + xm ** 2 / sxx))
+        keep = np.isfinite(se_beta) & (np.abs(beta) > self._z * se_beta)
+        beta = np.where(keep, np.clip(beta, 0.0, 1.0), 0.0)
+        # α again for the β kept (β = 0: the mean and its standard error)
+        alpha = tm - beta * xm
+        se_alpha = np.where(keep, se_alpha, target.std(axis=0, ddof=1) / math.sqrt(count))
+        alpha = np.where(np.abs(alpha) > self._z * se_alpha, alpha, 0.0)
+        good = np.isfinite(alpha) & np.isfinite(beta)
+        self.alpha, self.beta = np.where(good, alpha, 0.0), np.where(good, beta, 0.0)
+
+    def prediction(self) -> Array:
+        """N per input: the push expected over the step the next force acts, α + β y."""
+        return np.asarray(self.alpha + self.beta * self.estimate, dtype=float)
+
     def force(self, noise: Array) -> Array:
-        """The feed-forward force: minus the estimate shrunk by z times its ``noise`` (N)."""
-        allowance = self._z * np.asarray(noise, dtype=float)
-        shrunk = np.sign(self.estimate) * np.maximum(np.abs(self.estimate) - allowance, 0.0)
+        """The feed-forward force: minus the prediction shrunk by z β times ``noise`` (N, of y)."""
+        allowance = self._z * self.beta * np.asarray(noise, dtype=float)
+        predicted = self.prediction()
+        shrunk = np.sign(predicted) * np.maximum(np.abs(predicted) - allowance, 0.0)
         return np.asarray(-shrunk, dtype=float)
 
 

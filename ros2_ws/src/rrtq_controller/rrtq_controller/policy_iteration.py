@@ -22,7 +22,7 @@ from .bellman import Policy, bellman_rows
 from .config import SafeHold
 from .critic import Fit, LeastSquaresCritic, fit, residual
 from .guard import FALSE_ALARM, Brake, PolicyEvent, Sensing, held_below, trust_step
-from .observer import Observer
+from .observer import Observer, PushCanceller
 from .readout import WeightReadout
 from .rollout import AwayFrom, Rollout
 
@@ -51,6 +51,7 @@ class PolicyIteration(WeightReadout):
     _step_id: int
     _since_eval: int
     _steady: Array
+    _canceller: PushCanceller | None
     _braking_sense: Sensing
     _target: tuple[Array, Array]
     _initial: tuple[Array, Array]
@@ -125,6 +126,8 @@ class PolicyIteration(WeightReadout):
             mean, error = self.observer.steady_push(max(int(round(1.0 / self.config.dt)), 2))
             z = float(norm.ppf(1.0 - FALSE_ALARM / 2))
             self._steady = np.where(np.abs(mean) > z * error, mean, 0.0)
+            if self._canceller is not None:     # what of the push can be predicted, and how
+                self._canceller.fit(self.observer.pushes(), model.delay + 1)
         if isinstance(self.critic, LeastSquaresCritic):
             self.critic.evaluate(self._rows)
         else:
