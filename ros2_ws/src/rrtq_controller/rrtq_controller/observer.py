@@ -213,8 +213,8 @@ class Observer:
         last = self.model.ar if self.model is not None and self.reads_pushes else np.zeros(0)
         if p and len(last) == p and np.all(np.isfinite(last)) and np.any(last):
             starts.append(last.copy())
-        fits = [_cochrane_orcutt(regress, target, usable, p, a) for a in starts]
-        w, a, _ = min(fits, key=lambda fit: fit[2])
+        candidates = [_cochrane_orcutt(regress, target, usable, p, a) for a in starts]
+        w, a, _ = min(candidates, key=lambda fit: fit[2])
         if not np.all(np.isfinite(w)):
             return None                   # no model in data that cannot give one
         e = (target - regress[:, :-1] @ w[:-1])[same]     # the steady push included
