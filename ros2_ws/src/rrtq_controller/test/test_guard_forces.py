@@ -81,6 +81,29 @@ def test_brake_force_halves_when_the_velocity_reverses_and_doubles_when_it_does_
     assert b.force == 100.0                    # never beyond the limit
 
 
+@pytest.mark.parametrize('dead_steps', [0, 1, 2, 3])
+def test_a_brake_allowing_for_a_delay_the_robot_has_not_does_not_chatter_at_the_limit(dead_steps):
+    """Until the observer identifies the delay, the brake allows for the longest it can
+    identify (3 steps). On the 40 kg rover without a delay, from a 1000 N start, one step
+    overshoots rest (1000 N moves it 1.25 m/s a step): the velocity alternates in sign.
+    Compared only with the speed ``lag`` steps ago (the same sign for an even lag) the
+    overshoot went unseen and the force doubled to the limit, ±1000 N every other step
+    for as long as the hold lasted (seen in a robot-side run under white noise). Every
+    reversal halves the force: the robot is at rest within 2 s."""
+    A, B = ref.rover(mass=40.0, stiffness=0.0, damping=45.0)
+    plant = ref.Plant(A, B, DT)
+    brake = Brake(limit=1000.0, stop_time=0.5, dt=DT, sensing=Sensing(dead_steps=dead_steps))
+    brake.start(1000.0)
+    x = np.array([0.0, 0.0, 0.3, -0.3])
+    forces = []
+    for _ in range(int(4.0 / DT)):
+        u = brake(x, 2)
+        forces.append(float(np.abs(u).max()))
+        x = plant.step(x, u)
+    assert np.linalg.norm(x[2:]) < 0.05
+    assert max(forces[int(2.0 / DT):]) < 50.0
+
+
 @pytest.mark.parametrize('mass, damping, limit, v0', [(110.0, 15.0, 200.0, 0.5), (10.0, 5.0, 1000.0, 1.0),
                                                       (60.0, 40.0, 300.0, 0.8), (120.0, 8.0, 150.0, 0.3)])
 def test_keep_off_stops_an_approach_before_contact_within_the_limit(mass, damping, limit, v0):
