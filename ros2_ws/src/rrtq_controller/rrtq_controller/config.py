@@ -195,14 +195,15 @@ class ControllerConfig:
     the units of the forces, entering where the forces do (a matched disturbance)."""
     push_feedforward: bool = setting(False, doc='nominal variant with the observer: add to '
                                      'the policy\'s force the force that cancels the push '
-                                     'the observer sees, low-pass filtered (a disturbance '
-                                     'observer; push_filter_time); experimental, off by '
-                                     'default')
+                                     'the observer predicts from the low-pass filtered push '
+                                     'it reads (a disturbance observer; push_filter_time); '
+                                     'experimental, off by default')
     """Integral action, model-free toward the plant: without it a steady push F_d (a field, a
     slope, Coulomb friction) holds a robot F_d / K_p short of its waypoint, and a slow
-    sinusoid moves it by what the feedback alone leaves. Off by default: a model identified
-    mostly while the brake held the robot against a gust read a 575 N push that was not
-    there (docs/observer.md §6)."""
+    sinusoid moves it by what the feedback alone leaves. Only the predictable part is fed
+    forward (nothing of a white push). Off by default: under odometry noise a push read at
+    rest through a model biased by errors in variables pushed a robot out of the bounds,
+    and on a plant with Coulomb friction it winds up or never starts (docs/observer.md §6)."""
     push_filter_time: float = setting(0.25, low=0.0, low_open=True, unit='s',
                                       doc='push_feedforward: time constant of the low-pass '
                                       'filter of the push')

@@ -101,7 +101,8 @@ class Brake:
       robot has already been pushed with), capped at ``limit``;
     * when the speed did not fall by at least |v| Δt / ``stop_time`` over the last step
       (braking too weakly to stop within ``stop_time``), F doubles, up to ``limit``;
-    * when the velocity reversed (v · v_prev < 0: the step overshot rest), F halves.
+    * when the velocity reversed (v · v_prev < 0 between any two consecutive steps since the
+      last change: a step overshot rest), F halves.
 
     Every command is within ``limit`` per axis (|u_i| <= F <= limit). The brake removes
     kinetic energy wherever a force along -v decelerates the robot (vᵀ B_v v > 0 for the
