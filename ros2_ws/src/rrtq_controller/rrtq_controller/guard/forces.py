@@ -157,7 +157,7 @@ class Brake:
             before = float(np.linalg.norm(then))
             noise = sense.difference
             floor = noise / math.sqrt(2.0)
-            if (float(v @ then) < 0.0 and min(speed, before) > floor) or _flipped(self._recent, floor):
+            if (float(v @ then) < 0.0 and min(speed, before) > floor) or _flipped(self._recent, max(floor, rest)):
                 self.force *= 0.5
                 self._wait = lag - 1
             elif slowing_too_little(speed, before, lag * self.dt, self.stop_time, rest, noise):
@@ -170,6 +170,10 @@ class Brake:
 
 def _flipped(recent: deque[Array], floor: float) -> bool:
     """Whether the velocity reversed between two consecutive steps of ``recent``, both faster than ``floor``.
+
+    The caller's ``floor`` is the brake's rest speed (or the noise's, if larger): a sign
+    change at rest is the push or the noise jittering a robot that stands, not an overshoot
+    (counting those halved the force on every jitter of a robot held under a white push).
 
     An overshoot of rest, whatever the delay: comparing only speeds ``lag`` steps apart, a
     brake that overshot every step (a velocity alternating in sign, with an even lag the
