@@ -12,6 +12,8 @@ completed a leg (:meth:`PolicyIteration.revert`).
 
 from __future__ import annotations
 
+import math
+
 from functools import partial
 
 import numpy as np
@@ -21,7 +23,8 @@ from scipy.stats import norm
 from .bellman import Policy, bellman_rows
 from .config import SafeHold
 from .critic import Fit, LeastSquaresCritic, fit, residual
-from .guard import FALSE_ALARM, Brake, PolicyEvent, Sensing, held_below, trust_step
+from .guard import (FALSE_ALARM, Brake, DivergenceWatch, PolicyEvent, Sensing, held_below,
+                    trust_step)
 from .observer import Observer, PushCanceller
 from .readout import WeightReadout
 from .rollout import AwayFrom, Rollout
@@ -62,6 +65,7 @@ class PolicyIteration(WeightReadout):
     _full_legs: int
     _braking: bool
     _brake: Brake
+    _watch: DivergenceWatch
     _brake_started: float
     _brake_until: float
     _events: list[tuple[PolicyEvent, str]]
@@ -122,6 +126,14 @@ class PolicyIteration(WeightReadout):
             velocity_rows = model.gamma[2:2 + self.m]
             self._braking_sense.step_gain = (float(np.linalg.norm(velocity_rows, 2))
                                              if velocity_rows.size else 0.0)
+            # where the brake would stop the robot (guard.DivergenceWatch): the deceleration
+            # the actuator's limit reaches in the direction it reaches least, and the delay
+            weakest = (float(np.linalg.svd(velocity_rows, compute_uv=False).min())
+                       if velocity_rows.size else 0.0)
+            # (an actuator without a limit stops the robot within the delay: no such rule)
+            limit = self.config.force_limit
+            self._watch.brake_accel = weakest * limit / self.config.dt if math.isfinite(limit) else 0.0
+            self._watch.brake_lag = self._braking_sense.lag * self.config.dt
             # the last second's steady push, where it stands out of the noise (guard.KeepOff)
             mean, error = self.observer.steady_push(max(int(round(1.0 / self.config.dt)), 2))
             z = float(norm.ppf(1.0 - FALSE_ALARM / 2))
@@ -343,7 +355,9 @@ class PolicyIteration(WeightReadout):
         if brake or (event is PolicyEvent.HOLD and self.config.safe_hold is SafeHold.BRAKE):
             self._braking = True
             self._brake_started, self._brake_until = t, t + self.config.horizon
-            self._brake.start(max(self._force_scale(self.critic.window.applied()), 1.0))
+            # tripped where only the actuator's limit still stops it inside: at the limit
+            self._brake.start(self.config.force_limit if self._watch.hard
+                              else max(self._force_scale(self.critic.window.applied()), 1.0))
             reason += ', braking'
         self._note(event, 'leg diverged: ' + reason)
 

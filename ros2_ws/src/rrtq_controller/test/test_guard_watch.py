@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.stats import norm
 
-from rrtq_controller.guard import FALSE_ALARM, DivergenceWatch
+from rrtq_controller.guard import FALSE_ALARM, Brake, DivergenceWatch
 
 T = 10.0
 
@@ -165,3 +165,85 @@ def test_the_line_watch_allows_for_the_position_noise_at_its_false_alarm_rate():
                     break
     assert tripped['exact'] > 0.9 * legs
     assert tripped['noisy'] / legs <= FALSE_ALARM + 5 * np.sqrt(FALSE_ALARM / legs)
+
+
+def _braked_to_rest(watch: DivergenceWatch, x: np.ndarray, force: float) -> float:
+    """m off the line where the guard's brake, started at ``force``, brings the 110 kg /
+    15 kg/s / 200 N rover to rest from x̄ (the true plant, exact odometry)."""
+    mass, damping, limit, dt = 110.0, 15.0, 200.0, 0.05
+    brake = Brake(limit, 1.0, dt)
+    brake.start(force)
+    x = x.copy()
+    for _ in range(int(10.0 / dt)):
+        u = brake(x, 2)
+        x[2:4] += dt * (u - damping * x[2:4]) / mass
+        x[:2] += dt * x[2:4]
+        if brake.at_rest:
+            break
+    assert brake.at_rest
+    return watch.distance_from_ray(x)
+
+
+def test_the_watch_trips_where_braking_still_stops_the_robot_within_the_limit():
+    """A heavy robot pushed off its line: tripping once it is beyond the limit, the brake
+    let it overrun the limit by its stopping distance (a 110 kg rover with a 200 N actuator
+    under a 0.1 Hz push: 0.95 m at 1.9 m/s, and the running-max margin grew by as much on
+    every trip). Tripping where braking from here would stop it beyond the limit, the
+    guard's brake brings it to rest within the limit (give or take a step's motion)."""
+    x0 = np.array([-6.0, 0.0, 0.0, 0.0])      # along x; the line is y = 0
+    stopped = {}
+    for predict in (False, True):
+        watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0,
+                                deviation=0.25, brake_lag=0.05,
+                                brake_accel=200.0 / 110.0 if predict else 0.0)
+        watch.widest = 1.0
+        watch.start(x0)
+        x = x0.copy()
+        for _ in range(400):                  # pushed across its line: 1 m/s², up to 1.9 m/s
+            x[3] = min(x[3] + 0.05, 1.9)
+            x[:2] += x[2:4] * 0.05
+            x[0] = min(x[0] + 0.02, 0.0)
+            if watch.check(x):
+                break
+        assert watch.off_line and watch.hard == predict
+        stopped[predict] = _braked_to_rest(watch, x, 200.0 if watch.hard else 20.0)
+    limit = 1.0 + 0.25
+    assert stopped[False] > limit + 0.5       # it overran the limit by its stopping distance
+    assert limit - 0.1 < stopped[True] <= limit + 1.9 * 0.05
+
+
+def test_the_stopping_point_rule_is_armed_only_once_the_stop_lies_inside_the_limit():
+    """At a turn the new leg's line lies across the robot's velocity: braking at once would
+    stop it farther off than the policy turning it does, so the rule waits until the
+    stopping point is inside the limit; a robot heading back toward its line never trips."""
+    watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0, deviation=0.25,
+                            brake_accel=1.0)
+    watch.start(np.array([-4.0, 0.0, 0.0, 1.0]))  # the line is y = 0; moving across it at 1 m/s
+    assert not watch.armed                     # it would stop 0.5 m off > 0.25
+    assert watch.check(np.array([-3.9, 0.05, 0.0, 0.8])) == ''  # the policy turns it
+    assert watch.check(np.array([-3.8, 0.1, 0.3, 0.1])) == '' and watch.armed
+    assert watch.check(np.array([-3.7, 0.1, 0.3, -0.4])) == ''  # back toward the line
+    reason = watch.check(np.array([-3.6, 0.15, 0.3, 0.5]))       # stops 0.3 m off
+    assert watch.off_line and watch.hard and 'would stop it' in reason
+
+
+def test_the_stopping_point_allows_for_the_velocity_noise_at_its_false_alarm_rate():
+    """A robot exactly on its line, at speed along it, seen through odometry of σ_p and σ_v:
+    with no tolerance beyond the margin, the stopping point (σ_v times 0.4 s of braking
+    at 0.5 m/s²) trips the watch on at most α of its legs."""
+    x0 = np.array([-5.0, 0.0, 0.0, 0.0])
+    watch = DivergenceWatch(2.0, 1.0, 4.0, T, deviation=0.0, steps=200, brake_accel=0.5,
+                            position_std=0.02, velocity_std=0.05)
+    rng = np.random.default_rng(1)
+    legs, tripped = 500, 0
+    for _ in range(legs):
+        watch.widest = 0.0
+        watch.start(x0)
+        for k in range(200):
+            x = np.array([-5.0 + 0.02 * k, 0.0, 0.4, 0.0])
+            x[:2] += rng.normal(0.0, 0.02, 2)
+            x[2:] += rng.normal(0.0, 0.05, 2)
+            if watch.check(x):
+                tripped += 1
+                break
+    assert tripped / legs <= FALSE_ALARM + 5 * np.sqrt(FALSE_ALARM / legs)
