@@ -355,9 +355,10 @@ class PolicyIteration(WeightReadout):
         if brake or (event is PolicyEvent.HOLD and self.config.safe_hold is SafeHold.BRAKE):
             self._braking = True
             self._brake_started, self._brake_until = t, t + self.config.horizon
-            # tripped where only the actuator's limit still stops it inside: at the limit
-            self._brake.start(self.config.force_limit if self._watch.hard
-                              else max(self._force_scale(self.critic.window.applied()), 1.0))
+            # tripped where only the actuator's limit still stops it inside: hard
+            scale = max(self._force_scale(self.critic.window.applied()), 1.0)
+            self._brake.start(max(self._watch.hard_force(self.config.force_limit, self.config.dt),
+                                  scale) if self._watch.hard else scale)
             reason += ', braking'
         self._note(event, 'leg diverged: ' + reason)
 

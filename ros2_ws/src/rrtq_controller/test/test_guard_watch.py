@@ -206,7 +206,8 @@ def test_the_watch_trips_where_braking_still_stops_the_robot_within_the_limit():
             if watch.check(x):
                 break
         assert watch.off_line and watch.hard == predict
-        stopped[predict] = _braked_to_rest(watch, x, 200.0 if watch.hard else 20.0)
+        stopped[predict] = _braked_to_rest(watch, x, watch.hard_force(200.0, 0.05) if watch.hard
+                                           else 20.0)
     limit = 1.0 + 0.25
     assert stopped[False] > limit + 0.5       # it overran the limit by its stopping distance
     assert limit - 0.1 < stopped[True] <= limit + 1.9 * 0.05
@@ -247,3 +248,18 @@ def test_the_stopping_point_allows_for_the_velocity_noise_at_its_false_alarm_rat
                 tripped += 1
                 break
     assert tripped / legs <= FALSE_ALARM + 5 * np.sqrt(FALSE_ALARM / legs)
+
+
+def test_the_hard_brake_stops_a_robot_that_can_stop_in_a_step_without_throwing_it_back():
+    """After a stopping-point trip the brake starts at the force that stops the robot in one
+    step at the deceleration the limit reaches: the full 1000 N on a 40 kg rover at 0.5 m/s
+    would throw it back past rest at 0.75 m/s; this force brings it to rest in a step."""
+    watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0, deviation=0.25,
+                            brake_accel=1000.0 / 40.0)
+    watch.trip_speed = 0.5
+    force = watch.hard_force(1000.0, 0.05)
+    assert force == pytest.approx(400.0)
+    assert 0.5 - 0.05 * force / 40.0 == pytest.approx(0.0)
+    watch.trip_speed = 1.9                    # the 110 kg rover: the limit is not enough
+    watch.brake_accel = 200.0 / 110.0
+    assert watch.hard_force(200.0, 0.05) == 200.0

@@ -132,20 +132,22 @@ class DivergenceWatch:
     Off the line it also trips *before* the robot is beyond the limit, at the last step from
     which braking at the actuator's limit still stops it inside: when the point where that
     would bring it to rest, x̄[:2] + v (d + |v| / 2a) (v = x̄[2:4]; the brake pushes along
-    -v, d = :attr:`brake_lag`, a = :attr:`brake_accel`), leaves the limit. The brake then
-    starts at the limit (:attr:`hard`). Tripping only once the robot itself had left the
-    limit, a robot with little force for its mass overran it by its stopping distance on
-    every trip, and the running-max margin ratcheted up by as much: a 110 kg rover with a
-    200 N actuator under a 0.1 Hz push tripped at 1.9 m/s and stopped 0.95 m beyond, leg
-    after leg, until the margin (3.6 m) cut off the goal. A robot that stops within a step
-    or two (the rover at 1000 N: 0.3 cm from 0.4 m/s) is watched as before. The rule needs
-    a: it waits for the observer's first model. It is armed only where the stopping point
-    is inside the limit: a robot whose stop lies outside already (at a turn, where the new
-    leg's line is across its velocity) is better served by the policy turning it than by a
-    brake that stops it straight on; it is armed once the stopping point is back inside.
-    The stopping point allows z (σ_p² + (σ_v (d + |v| / 2a))²)^½ for the odometry noise, as
-    the limit allows z σ_p. Legs too short for a line are not predicted (their limit
-    already allows the initial speed for ``stop_time``).
+    -v, d = :attr:`brake_lag`, a = :attr:`brake_accel`), leaves the limit (:attr:`hard`).
+    The brake then starts at the force that stops the robot in one step, at most the limit
+    (:meth:`hard_force`). Tripping only once the robot itself had left the limit, a robot
+    with little force for its mass overran it by its stopping distance on every trip, and
+    the running-max margin ratcheted up by as much: a 110 kg rover with a 200 N actuator
+    under a 0.1 Hz push tripped at 1.9 m/s and stopped 0.95 m beyond, leg after leg, until
+    the margin (3.6 m) cut off the goal. A robot that stops within a step (the rover at
+    1000 N from 0.4 m/s) trips at most a step or two before it would have crossed. The rule
+    needs a: it waits for the observer's first model, and an actuator without a limit has
+    none. It is armed only where the stopping point is inside the limit: a robot whose stop
+    lies outside already (at a turn, where the new leg's line is across its velocity) is
+    better served by the policy turning it than by a brake that stops it straight on; it is
+    armed once the stopping point is back inside. The stopping point allows
+    z (σ_p² + (σ_v (d + |v| / 2a))²)^½ for the odometry noise, as the limit allows z σ_p.
+    Legs too short for a line are not predicted (their limit already allows the initial
+    speed for ``stop_time``).
     """
 
     distance: float
@@ -186,7 +188,9 @@ class DivergenceWatch:
     brake_lag: float = 0.0
     """s: how long the brake's force takes to act (the actuation delay, one step included)."""
     hard: bool = False
-    """Whether the last trip was the stopping-point rule (the brake starts at the limit)."""
+    """Whether the last trip was the stopping-point rule (the brake starts hard)."""
+    trip_speed: float = 0.0
+    """m/s: the speed at the last trip."""
     armed: bool = False
     """Whether the stopping point has been inside the limit on this leg (see above)."""
     _z: float = 0.0
@@ -259,11 +263,23 @@ class DivergenceWatch:
                 self.armed = True
             elif self.armed:
                 self.tripped = self.off_line = self.hard = True
+                self.trip_speed = float(np.linalg.norm(x[2:4]))
                 stop, limit = beyond
                 return (f'braking from {float(np.linalg.norm(x[2:4])):.3g} m/s at '
                         f'{self.brake_accel:.3g} m/s² would stop it {stop:.3g} m off its line '
                         f'(ray) > {limit:.3g} m')
         return ''
+
+    def hard_force(self, limit: float, dt: float) -> float:
+        """N: the brake's start after a stopping-point trip, at most ``limit``.
+
+        The force that stops the robot from :attr:`trip_speed` in one step of ``dt`` at the
+        deceleration the limit reaches: no full force that throws a robot that stops in a
+        step back past rest.
+        """
+        if self.brake_accel <= 0.0:
+            return limit
+        return limit * min(1.0, self.trip_speed / (self.brake_accel * dt))
 
     def _stop_beyond(self, x: Array) -> tuple[float, float] | None:
         """(distance off the ray, limit) of where braking from x̄ stops, if beyond the limit."""
