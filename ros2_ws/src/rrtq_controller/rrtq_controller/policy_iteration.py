@@ -340,7 +340,20 @@ class PolicyIteration(WeightReadout):
         along y had a negative gain along x, and kept through brake after brake it drove
         the robot 1 km off the map at the force limit.
         A brake lasts until the robot is at rest, at most a horizon from ``t`` (s).
+
+        A trip of the watch's stopping-point rule (``guard.DivergenceWatch.hard``: the robot
+        is still inside the limit, braking now is the last chance to keep it there) brakes
+        and keeps the actors' policy: the robot has not left the margin, and the policy is
+        judged by the limit itself, as before the rule (resetting it at every such trip
+        held a 110 kg rover under a periodic push at the zero gain).
         """
+        if brake and self._watch.hard:
+            self._braking = True
+            self._brake_started, self._brake_until = t, t + self.config.horizon
+            self._brake.start(max(self._watch.hard_force(self.config.force_limit, self.config.dt),
+                                  max(self._force_scale(self.critic.window.applied()), 1.0)))
+            self._note(PolicyEvent.HOLD, 'leg diverging: ' + reason + ', braking; policy kept')
+            return
         if self._completed is not None and not self._adopted_since:
             if brake and not self._spared:
                 self._spared = True      # off its line: the robot may have turned too fast
@@ -355,10 +368,7 @@ class PolicyIteration(WeightReadout):
         if brake or (event is PolicyEvent.HOLD and self.config.safe_hold is SafeHold.BRAKE):
             self._braking = True
             self._brake_started, self._brake_until = t, t + self.config.horizon
-            # tripped where only the actuator's limit still stops it inside: hard
-            scale = max(self._force_scale(self.critic.window.applied()), 1.0)
-            self._brake.start(max(self._watch.hard_force(self.config.force_limit, self.config.dt),
-                                  scale) if self._watch.hard else scale)
+            self._brake.start(max(self._force_scale(self.critic.window.applied()), 1.0))
             reason += ', braking'
         self._note(event, 'leg diverged: ' + reason)
 
