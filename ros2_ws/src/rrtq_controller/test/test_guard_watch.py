@@ -263,3 +263,15 @@ def test_the_hard_brake_stops_a_robot_that_can_stop_in_a_step_without_throwing_i
     watch.trip_speed = 1.9                    # the 110 kg rover: the limit is not enough
     watch.brake_accel = 200.0 / 110.0
     assert watch.hard_force(200.0, 0.05) == 200.0
+
+
+def test_a_robot_the_limit_stops_within_two_steps_is_watched_at_the_limit_itself():
+    """The 40 kg rover at 1000 N stops from 0.5 m/s in under a step: the stopping-point rule
+    stays out of its way (it would only trip a step early and brake a robot that overruns
+    the limit by about a step's motion anyway); the limit itself still trips."""
+    watch = DivergenceWatch(distance=3.0, floor=1.0, speed=6.0, horizon=10.0, deviation=0.25,
+                            brake_accel=1000.0 / 40.0, brake_lag=0.05)
+    watch.start(np.array([-4.0, 0.0, 0.5, 0.0]))
+    assert watch.check(np.array([-3.0, 0.24, 0.0, 0.5])) == ''   # stops 0.27 m off: no trip
+    reason = watch.check(np.array([-2.9, 0.26, 0.0, 0.5]))
+    assert watch.off_line and not watch.hard and 'off its line' in reason

@@ -133,18 +133,20 @@ class DivergenceWatch:
     which braking at the actuator's limit still stops it inside: when the point where that
     would bring it to rest, x̄[:2] + v (d + |v| / 2a) (v = x̄[2:4]; the brake pushes along
     -v, d = :attr:`brake_lag`, a = :attr:`brake_accel`), leaves the limit (:attr:`hard`).
-    The brake then starts at the force that stops the robot in one step, at most the limit
-    (:meth:`hard_force`). Tripping only once the robot itself had left the limit, a robot
-    with little force for its mass overran it by its stopping distance on every trip, and
-    the running-max margin ratcheted up by as much: a 110 kg rover with a 200 N actuator
-    under a 0.1 Hz push tripped at 1.9 m/s and stopped 0.95 m beyond, leg after leg, until
-    the margin (3.6 m) cut off the goal. A robot that stops within a step (the rover at
-    1000 N from 0.4 m/s) trips at most a step or two before it would have crossed. The rule
-    needs a: it waits for the observer's first model, and an actuator without a limit has
-    none. It is armed only where the stopping point is inside the limit: a robot whose stop
-    lies outside already (at a turn, where the new leg's line is across its velocity) is
-    better served by the policy turning it than by a brake that stops it straight on; it is
-    armed once the stopping point is back inside. The stopping point allows
+    The controller then brakes, starting at the force that stops the robot in one step, at
+    most the limit (:meth:`hard_force`), and keeps its policy: the robot has not left the
+    margin. Tripping only once the robot itself had left the limit, a robot with little
+    force for its mass overran it by its stopping distance on every trip, and the
+    running-max margin ratcheted up by as much: a 110 kg rover with a 200 N actuator under
+    a 0.1 Hz push tripped at 1.9 m/s and stopped 0.95 m beyond, leg after leg, until the
+    margin (3.6 m) cut off the goal. A robot that the limit stops within two steps
+    (|v| <= 2 a Δt: the 40 kg rover at 1000 N below 2.5 m/s) is watched as before: it
+    overruns the limit by about a step's motion. The rule needs a: it waits for the
+    observer's first model, and an actuator without a limit has none. It is armed only
+    where the stopping point is inside the limit: a robot whose stop lies outside already
+    (at a turn, where the new leg's line is across its velocity) is better served by the
+    policy turning it than by a brake that stops it straight on; it is armed once the
+    stopping point is back inside. The stopping point allows
     z (σ_p² + (σ_v (d + |v| / 2a))²)^½ for the odometry noise, as the limit allows z σ_p.
     Legs too short for a line are not predicted (their limit already allows the initial
     speed for ``stop_time``).
@@ -286,7 +288,10 @@ class DivergenceWatch:
         if self.line is None or self.brake_accel <= 0.0 or x.size < 4:
             return None
         v = np.asarray(x[2:4], dtype=float)
-        ahead = self.brake_lag + 0.5 * float(np.linalg.norm(v)) / self.brake_accel
+        speed = float(np.linalg.norm(v))
+        if speed <= 2.0 * self.brake_accel * self.horizon / max(self.steps, 1):
+            return None     # it stops within two steps: the limit itself is near enough
+        ahead = self.brake_lag + 0.5 * speed / self.brake_accel
         stop = self.distance_from_ray(x[:2] + v * ahead)
         limit = self.line_limit + self._z * (math.hypot(self.position_std, self.velocity_std * ahead)
                                              - self.position_std)
