@@ -23,8 +23,8 @@ from scipy.stats import norm
 from .bellman import Policy, bellman_rows
 from .config import SafeHold
 from .critic import Fit, LeastSquaresCritic, fit, residual
-from .guard import (FALSE_ALARM, Brake, DivergenceWatch, PolicyEvent, Sensing, held_below,
-                    trust_step)
+from .guard import (FALSE_ALARM, Brake, DivergenceWatch, KeepOff, PolicyEvent, Sensing,
+                    held_below, trust_step)
 from .observer import Observer, PushCanceller
 from .readout import WeightReadout
 from .rollout import AwayFrom, Rollout
@@ -66,6 +66,8 @@ class PolicyIteration(WeightReadout):
     _braking: bool
     _brake: Brake
     _watch: DivergenceWatch
+    _keep_off: KeepOff
+    _keep_ahead: KeepOff
     _brake_started: float
     _brake_until: float
     _events: list[tuple[PolicyEvent, str]]
@@ -133,6 +135,7 @@ class PolicyIteration(WeightReadout):
             # (an actuator without a limit stops the robot within the delay: no such rule)
             limit = self.config.force_limit
             self._watch.brake_accel = weakest * limit / self.config.dt if math.isfinite(limit) else 0.0
+            self._keep_off.brake_accel = self._keep_ahead.brake_accel = self._watch.brake_accel
             self._watch.brake_lag = self._braking_sense.lag * self.config.dt
             # the last second's steady push, where it stands out of the noise (guard.KeepOff)
             mean, error = self.observer.steady_push(max(int(round(1.0 / self.config.dt)), 2))
