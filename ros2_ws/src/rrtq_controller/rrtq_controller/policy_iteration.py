@@ -12,8 +12,6 @@ completed a leg (:meth:`PolicyIteration.revert`).
 
 from __future__ import annotations
 
-import math
-
 from functools import partial
 
 import numpy as np
@@ -23,8 +21,7 @@ from scipy.stats import norm
 from .bellman import Policy, bellman_rows
 from .config import SafeHold
 from .critic import Fit, LeastSquaresCritic, fit, residual
-from .guard import (FALSE_ALARM, Brake, DivergenceWatch, KeepOff, PolicyEvent, Sensing,
-                    held_below, trust_step)
+from .guard import FALSE_ALARM, Brake, PolicyEvent, Sensing, held_below, trust_step
 from .observer import Observer, PushCanceller
 from .readout import WeightReadout
 from .rollout import AwayFrom, Rollout
@@ -65,9 +62,6 @@ class PolicyIteration(WeightReadout):
     _full_legs: int
     _braking: bool
     _brake: Brake
-    _watch: DivergenceWatch
-    _keep_off: KeepOff
-    _keep_ahead: KeepOff
     _brake_started: float
     _brake_until: float
     _events: list[tuple[PolicyEvent, str]]
@@ -128,15 +122,6 @@ class PolicyIteration(WeightReadout):
             velocity_rows = model.gamma[2:2 + self.m]
             self._braking_sense.step_gain = (float(np.linalg.norm(velocity_rows, 2))
                                              if velocity_rows.size else 0.0)
-            # where the brake would stop the robot (guard.DivergenceWatch): the deceleration
-            # the actuator's limit reaches in the direction it reaches least, and the delay
-            weakest = (float(np.linalg.svd(velocity_rows, compute_uv=False).min())
-                       if velocity_rows.size else 0.0)
-            # (an actuator without a limit stops the robot within the delay: no such rule)
-            limit = self.config.force_limit
-            self._watch.brake_accel = weakest * limit / self.config.dt if math.isfinite(limit) else 0.0
-            self._keep_off.brake_accel = self._keep_ahead.brake_accel = self._watch.brake_accel
-            self._watch.brake_lag = self._braking_sense.lag * self.config.dt
             # the last second's steady push, where it stands out of the noise (guard.KeepOff)
             mean, error = self.observer.steady_push(max(int(round(1.0 / self.config.dt)), 2))
             z = float(norm.ppf(1.0 - FALSE_ALARM / 2))
@@ -343,20 +328,7 @@ class PolicyIteration(WeightReadout):
         along y had a negative gain along x, and kept through brake after brake it drove
         the robot 1 km off the map at the force limit.
         A brake lasts until the robot is at rest, at most a horizon from ``t`` (s).
-
-        A trip of the watch's stopping-point rule (``guard.DivergenceWatch.hard``: the robot
-        is still inside the limit, braking now is the last chance to keep it there) brakes
-        and keeps the actors' policy: the robot has not left the margin, and the policy is
-        judged by the limit itself, as before the rule (resetting it at every such trip
-        held a 110 kg rover under a periodic push at the zero gain).
         """
-        if brake and self._watch.hard:
-            self._braking = True
-            self._brake_started, self._brake_until = t, t + self.config.horizon
-            self._brake.start(max(self._watch.hard_force(self.config.force_limit, self.config.dt),
-                                  max(self._force_scale(self.critic.window.applied()), 1.0)))
-            self._note(PolicyEvent.HOLD, 'leg diverging: ' + reason + ', braking; policy kept')
-            return
         if self._completed is not None and not self._adopted_since:
             if brake and not self._spared:
                 self._spared = True      # off its line: the robot may have turned too fast

@@ -107,7 +107,6 @@ class QLearningController(PolicyIteration):
         identify (a brake that doubles every step against a delayed actuator reaches the
         limit before its first force has acted: 1000 N on a 40 kg rover, 0.1 s late)."""
         self._brake = Brake(c.force_limit, c.hold_stop_time, c.dt, sensing=self._braking_sense)
-        self._watch.brake_lag = self._braking_sense.lag * c.dt   # until the observer knows
         self._keep_off = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time,
                                  sensing=self.sensing)
         self._keep_ahead = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time,
@@ -229,7 +228,6 @@ class QLearningController(PolicyIteration):
         std = float(np.sqrt(velocity.mean())) if velocity.size else 0.0
         self.sensing.velocity_std = self._braking_sense.velocity_std = std
         self._watch.position_std = float(np.sqrt(variance[:2].mean()))
-        self._watch.velocity_std = std
 
     def completed_leg(self) -> None:
         """Mark the current leg as completed (it entered its window).

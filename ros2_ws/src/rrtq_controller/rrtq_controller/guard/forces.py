@@ -223,11 +223,6 @@ class KeepOff:
       heavy robot cannot stop within the zone from the speed it may enter it at (120 kg at
       150 N stops from 0.8 m/s in 0.26 m at the limit, and the push ramps up from the
       probing scale first: seen touching an obstacle 5 mm deep);
-    * obliquely too, it looks ahead by the robot's stopping distance at the actuator's
-      limit, a d + a² / 2A (d the delay plus a step, A = :attr:`brake_accel`), where that
-      takes more than two steps to cover (a > 2 A Δt: never on the 40 kg rover at 1000 N
-      below 2.5 m/s): seen on the 110 kg rover at 200 N, 47° off head-on, approaching the
-      world's bounds at 1.36 m/s (0.56 m to stop) from 0.5 m, it left them by 2 cm;
     * outside the zone and its lead nothing is changed.
 
     The push removes approach speed wherever a force along n accelerates the robot along
@@ -252,9 +247,6 @@ class KeepOff:
 
     head_on: float = math.cos(math.pi / 4.0)
     """The look-ahead is for approaches within 45° of head-on (a >= this |v|)."""
-    brake_accel: float = 0.0
-    """m/s²: the deceleration the actuator's limit reaches (the observer's input gain, in the
-    direction it reaches least); 0: not known (no look-ahead by the stopping distance)."""
 
     def reach(self, velocity: Array, direction: Array) -> float:
         """m: the distance within which it acts, ``zone`` + ``lead`` times the approach speed.
@@ -266,14 +258,9 @@ class KeepOff:
         n = np.asarray(direction, dtype=float)
         v = np.asarray(velocity, dtype=float)[:n.size]
         a = -float(v @ n)
-        if self.zone <= 0.0:
-            return self.zone                       # off
-        stopping = 0.0                             # where the limit takes more than two steps
-        if self.brake_accel > 0.0 and a > 2.0 * self.brake_accel * self.dt:
-            stopping = a * self.sensing.lag * self.dt + a * a / (2.0 * self.brake_accel)
-        if a < self.head_on * float(np.linalg.norm(v)):
-            return self.zone + stopping            # not head-on
-        return self.zone + max(self.lead * a, stopping)
+        if self.zone <= 0.0 or a < self.head_on * float(np.linalg.norm(v)):
+            return self.zone                       # off (no zone), or not head-on
+        return self.zone + self.lead * a
 
     def __call__(self, u: Array, velocity: Array, distance: float, direction: Array,
                  scale: Callable[[], float], steady: Array | None = None) -> Array:

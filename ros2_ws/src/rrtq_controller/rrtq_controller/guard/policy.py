@@ -128,28 +128,6 @@ class DivergenceWatch:
     much.
     It trips at most once per leg (the controller starts it afresh where a brake has
     stopped the robot).
-
-    Off the line it also trips *before* the robot is beyond the limit, at the last step from
-    which braking at the actuator's limit still stops it inside: when the point where that
-    would bring it to rest, x̄[:2] + v (d + |v| / 2a) (v = x̄[2:4]; the brake pushes along
-    -v, d = :attr:`brake_lag`, a = :attr:`brake_accel`), leaves the limit (:attr:`hard`).
-    The controller then brakes, starting at the force that stops the robot in one step, at
-    most the limit (:meth:`hard_force`), and keeps its policy: the robot has not left the
-    margin. Tripping only once the robot itself had left the limit, a robot with little
-    force for its mass overran it by its stopping distance on every trip, and the
-    running-max margin ratcheted up by as much: a 110 kg rover with a 200 N actuator under
-    a 0.1 Hz push tripped at 1.9 m/s and stopped 0.95 m beyond, leg after leg, until the
-    margin (3.6 m) cut off the goal. A robot that the limit stops within two steps
-    (|v| <= 2 a Δt: the 40 kg rover at 1000 N below 2.5 m/s) is watched as before: it
-    overruns the limit by about a step's motion. The rule needs a: it waits for the
-    observer's first model, and an actuator without a limit has none. It is armed only
-    where the stopping point is inside the limit: a robot whose stop lies outside already
-    (at a turn, where the new leg's line is across its velocity) is better served by the
-    policy turning it than by a brake that stops it straight on; it is armed once the
-    stopping point is back inside. The stopping point allows
-    z (σ_p² + (σ_v (d + |v| / 2a))²)^½ for the odometry noise, as the limit allows z σ_p.
-    Legs too short for a line are not predicted (their limit already allows the initial
-    speed for ``stop_time``).
     """
 
     distance: float
@@ -182,21 +160,6 @@ class DivergenceWatch:
     its line that noise alone trips on at most a share α of its legs)."""
     steps: int = 200
     """Steps of a horizon (T / Δt), over which :attr:`position_std`'s false alarm is spread."""
-    velocity_std: float = 0.0
-    """σ_v, m/s per axis of the odometry (the stopping point allows for it)."""
-    brake_accel: float = 0.0
-    """m/s²: the deceleration the actuator's limit reaches (through the observer's input
-    gain, in the direction it reaches least); 0: not known (no stopping-point rule)."""
-    brake_lag: float = 0.0
-    """s: how long the brake's force takes to act (the actuation delay, one step included)."""
-    hard: bool = False
-    """Whether the last trip was the stopping-point rule (the brake starts hard)."""
-    trip_speed: float = 0.0
-    """m/s: the speed at the last trip."""
-    armed: bool = False
-    """Whether the stopping point has been inside the limit on this leg (see above)."""
-    _z: float = 0.0
-    """The two-sided normal quantile of α spread over a horizon's steps (set by :meth:`start`)."""
 
     def start(self, x0: Array, renew: bool = True, moved: Array | None = None) -> None:
         """A new leg from x̄0; ``renew`` makes it the reference.
@@ -215,15 +178,14 @@ class DivergenceWatch:
         x0 = np.asarray(x0, dtype=float)
         if not renew and moved is not None and self.line is not None:
             renew = float(np.linalg.norm(x0 + np.asarray(moved, dtype=float))) < self.leg_d0
-        self.tripped = self.off_line = self.hard = False
+        self.tripped = self.off_line = False
         self.line = x0[:2].copy()
         self.leg_d0 = float(np.linalg.norm(x0))
         self.short = float(np.linalg.norm(self.line)) <= self.deviation   # no line at that scale
         coast = float(np.linalg.norm(x0[2:])) * self.stop_time if self.short else 0.0
         # |distance| from the line: two-sided, α spread over the steps of a leg (union bound)
-        self._z = float(norm.ppf(1.0 - FALSE_ALARM / (2 * max(self.steps, 1))))
-        self.line_limit = self.widest + self.deviation + coast + self._z * self.position_std
-        self.armed = not self.short and self._stop_beyond(x0) is None
+        noise = float(norm.ppf(1.0 - FALSE_ALARM / (2 * max(self.steps, 1)))) * self.position_std
+        self.line_limit = self.widest + self.deviation + coast + noise
         if not renew and self.d0 > 1e-9:
             if moved is None or self.offset is None:
                 self.offset = None
@@ -259,43 +221,7 @@ class DivergenceWatch:
                         f'before + {self.deviation:g} + its initial speed for {self.stop_time:g} s)')
             return (f'{off:.3g} m off its line (ray) > {self.line_limit - self.deviation:.3g} m '
                     f'(the widest before) + {self.deviation:g}')
-        if not self.short:
-            beyond = self._stop_beyond(x)
-            if beyond is None:
-                self.armed = True
-            elif self.armed:
-                self.tripped = self.off_line = self.hard = True
-                self.trip_speed = float(np.linalg.norm(x[2:4]))
-                stop, limit = beyond
-                return (f'braking from {float(np.linalg.norm(x[2:4])):.3g} m/s at '
-                        f'{self.brake_accel:.3g} m/s² would stop it {stop:.3g} m off its line '
-                        f'(ray) > {limit:.3g} m')
         return ''
-
-    def hard_force(self, limit: float, dt: float) -> float:
-        """N: the brake's start after a stopping-point trip, at most ``limit``.
-
-        The force that stops the robot from :attr:`trip_speed` in one step of ``dt`` at the
-        deceleration the limit reaches: no full force that throws a robot that stops in a
-        step back past rest.
-        """
-        if self.brake_accel <= 0.0:
-            return limit
-        return limit * min(1.0, self.trip_speed / (self.brake_accel * dt))
-
-    def _stop_beyond(self, x: Array) -> tuple[float, float] | None:
-        """(distance off the ray, limit) of where braking from x̄ stops, if beyond the limit."""
-        if self.line is None or self.brake_accel <= 0.0 or x.size < 4:
-            return None
-        v = np.asarray(x[2:4], dtype=float)
-        speed = float(np.linalg.norm(v))
-        if speed <= 2.0 * self.brake_accel * self.horizon / max(self.steps, 1):
-            return None     # it stops within two steps: the limit itself is near enough
-        ahead = self.brake_lag + 0.5 * speed / self.brake_accel
-        stop = self.distance_from_ray(x[:2] + v * ahead)
-        limit = self.line_limit + self._z * (math.hypot(self.position_std, self.velocity_std * ahead)
-                                             - self.position_std)
-        return (stop, limit) if stop > limit else None
 
     def distance_from_line(self, x: Array) -> float:
         """m: D_rob of x̄ on the current leg (its start x̄0, its target the origin of x̄)."""
