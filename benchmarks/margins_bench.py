@@ -21,21 +21,17 @@ import sys
 
 import numpy as np
 import yaml
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parent))
 
 from common import save  # noqa: E402
 from rrtq_bringup.margin_coverage import coverage  # noqa: E402
+from rrtq_bringup.run_data import messages  # noqa: E402
 from rrtq_planner.margins.coverage import binomial_interval  # noqa: E402
 
 
 def statuses(recording: pathlib.Path) -> list:
-    factory = DecoderFactory()
-    with open(recording, 'rb') as f:
-        return [factory.decoder_for(c.message_encoding, s)(m.data) for s, c, m in
-                make_reader(f).iter_messages(topics=['/safety/status'], log_time_order=True)]
+    return messages(recording, '/safety/status')
 
 
 def run_row(seed_dir: pathlib.Path) -> dict:

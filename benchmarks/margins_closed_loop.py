@@ -61,17 +61,10 @@ def leg_tubes(recording: pathlib.Path) -> dict[int, tuple[float, bool | None]]:
     The tube is /safety/status's (0: none); None for the level: a recording older than the
     field.
     """
-    from mcap.reader import make_reader
-    from mcap_ros2.decoder import DecoderFactory
+    from rrtq_bringup.run_data import messages, safety_legs
 
-    factory, out = DecoderFactory(), {}
-    with open(recording, 'rb') as f:
-        for schema, channel, message in make_reader(f).iter_messages(
-                topics=['/safety/status'], log_time_order=True):
-            msg = factory.decoder_for(channel.message_encoding, schema)(message.data)
-            out.setdefault(int(msg.leg_index),
-                           (float(msg.leg_tube), getattr(msg, 'leg_refuted', None)))
-    return out
+    return {leg.index: (leg.tube, leg.refuted)
+            for leg in safety_legs(messages(recording, '/safety/status'), by='leg_index')}
 
 
 def mode_row(conf: dict, mode: str) -> dict:

@@ -17,9 +17,7 @@ from __future__ import annotations
 import datetime
 import pathlib
 
-from mcap.reader import make_reader
-from mcap_ros2.decoder import DecoderFactory
-
+from rrtq_bringup.run_data import messages, safety_legs
 from rrtq_bringup.scenario import Scenario
 from rrtq_common import topics
 from rrtq_planner.margins.calibration import Calibration, read_calibration, write_calibration
@@ -35,18 +33,9 @@ def recorded_calibration(recording: str | pathlib.Path, source: str = '',
 
     A recording older than ``leg_refuted`` counts every leg with a tube as normalized.
     """
-    factory = DecoderFactory()
-    last: dict[int, tuple[float, float, bool]] = {}
-    learned = False
-    with open(recording, 'rb') as f:
-        for schema, channel, raw in make_reader(f).iter_messages(topics=[topics.SAFETY_STATUS],
-                                                                 log_time_order=True):
-            msg = factory.decoder_for(channel.message_encoding, schema)(raw.data)
-            if msg.legs > 0:
-                last[int(msg.legs)] = (float(msg.leg_deviation), float(msg.leg_tube),
-                                       bool(getattr(msg, 'leg_refuted', False)))
-                learned |= msg.margin_mode == 'learned_bound'
-    ordered = [last[k] for k in sorted(last)]
+    statuses = [s for s in messages(recording, topics.SAFETY_STATUS) if s.legs > 0]
+    learned = any(s.margin_mode == 'learned_bound' for s in statuses)
+    ordered = [(leg.deviation, leg.tube, bool(leg.refuted)) for leg in safety_legs(statuses)]
     legs = ordered if learned else []
     return Calibration(tuple(d for d, _, _ in ordered), source, created,
                        tuple(d / tube for d, tube, up in legs if tube > 0.0 and not up),

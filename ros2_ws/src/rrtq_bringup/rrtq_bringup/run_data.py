@@ -28,6 +28,58 @@ def _polygons(msg) -> list[tuple[str, np.ndarray]]:
             for o in msg.obstacles]
 
 
+def messages(path: str | pathlib.Path, topic: str) -> list[Any]:
+    """Every message of ``topic`` in the recording, decoded, in log-time order."""
+    factory = DecoderFactory()
+    with open(path, 'rb') as f:
+        return [factory.decoder_for(c.message_encoding, s)(m.data) for s, c, m in
+                make_reader(f).iter_messages(topics=[topic], log_time_order=True)]
+
+
+@dataclasses.dataclass(frozen=True)
+class SafetyLeg:
+    """One leg as ``/safety/status`` reports it (the recording's one reading of its legs)."""
+
+    index: int
+    """The status field that numbers it (``legs`` by default: the legs measured so far, the
+    current one included; or the controller's ``leg_index``)."""
+    start: float
+    """s: the stamp of its first status."""
+    margin: float
+    """m: ``leg_margin`` at its first status, the margin in force at its start."""
+    tube: float
+    """m: ``leg_tube``, the tube learned_bound predicted at its start (0: none or another mode)."""
+    scale: float
+    """The calibrated scale at its start (1: uncalibrated)."""
+    refuted: bool | None
+    """Whether the tube rested on a level residuals raised (None: a recording older than it)."""
+    deviation: float
+    """m: ``leg_deviation`` at its last status, its largest deviation."""
+    least_margin: float
+    """m: the least ``margin`` published while it ran."""
+
+
+def safety_legs(statuses: list[Any], by: str = 'legs') -> list[SafetyLeg]:
+    """The legs of a run's ``/safety/status`` messages, in order.
+
+    Statuses before the first leg (``legs`` = 0) belong to none. ``by``: the field that
+    numbers them.
+    """
+    legs: dict[int, SafetyLeg] = {}
+    for s in statuses:
+        if s.legs == 0:
+            continue
+        key = int(getattr(s, by))
+        leg = legs.get(key)
+        if leg is None:
+            leg = SafetyLeg(key, _stamp(s.header), float(s.leg_margin), float(s.leg_tube),
+                            float(s.scale), getattr(s, 'leg_refuted', None),
+                            float(s.leg_deviation), float(s.margin))
+        legs[key] = dataclasses.replace(leg, deviation=float(s.leg_deviation),
+                                        least_margin=min(leg.least_margin, float(s.margin)))
+    return [legs[k] for k in sorted(legs)]
+
+
 @dataclasses.dataclass
 class RunData:
     """Time series and snapshots of one run (times in s of sim time)."""

@@ -23,12 +23,11 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from mcap.reader import make_reader  # noqa: E402
-from mcap_ros2.decoder import DecoderFactory  # noqa: E402
 
+from rrtq_bringup.run_data import messages, safety_legs  # noqa: E402
 from rrtq_common import topics  # noqa: E402
 
-__all__ = ['leg_margins', 'leg_tubes', 'read_estimates', 'true_field', 'plot_margins', 'plot_field',
+__all__ = ['read_estimates', 'true_field', 'plot_margins', 'plot_field',
            'margins_summary']
 
 
@@ -36,40 +35,9 @@ def _stamp(header: Any) -> float:
     return header.stamp.sec + header.stamp.nanosec * 1e-9
 
 
-def _messages(recording: pathlib.Path, topic: str) -> list[Any]:
-    factory = DecoderFactory()
-    with open(recording, 'rb') as f:
-        return [factory.decoder_for(c.message_encoding, s)(m.data) for s, c, m in
-                make_reader(f).iter_messages(topics=[topic], log_time_order=True)]
-
-
-def leg_margins(statuses: list[Any]) -> list[tuple[float, float, float]]:
-    """(start time s, margin in force at its start m, largest deviation m) of every leg.
-
-    Read off ``/safety/status``: a leg's ``leg_margin`` at its first step and its
-    ``leg_deviation`` at its last (``legs`` counts the legs, the current one included).
-    """
-    out: dict[int, list[float]] = {}
-    for s in statuses:
-        if s.legs == 0:
-            continue
-        row = out.setdefault(int(s.legs), [_stamp(s.header), float(s.leg_margin), 0.0])
-        row[2] = float(s.leg_deviation)
-    return [(t, m, d) for t, m, d in (out[k] for k in sorted(out))]
-
-
-def leg_tubes(statuses: list[Any]) -> list[tuple[float, float]]:
-    """(uncalibrated tube m, scale) of every leg at its start (learned_bound; 0 and 1 else)."""
-    out: dict[int, tuple[float, float]] = {}
-    for s in statuses:
-        if s.legs > 0:
-            out.setdefault(int(s.legs), (float(s.leg_tube), float(s.scale)))
-    return [out[k] for k in sorted(out)]
-
-
 def read_estimates(recording: pathlib.Path) -> list[Any]:
     """The recorded ``/safety/disturbance_estimate`` messages, in time."""
-    return _messages(recording, topics.DISTURBANCE_ESTIMATE)
+    return messages(recording, topics.DISTURBANCE_ESTIMATE)
 
 
 def grid(est: Any) -> np.ndarray:
@@ -103,19 +71,18 @@ def plot_margins(statuses: list[Any], robot_radius: float, path: pathlib.Path) -
     """``margins.png``: margin over time against the legs' realised deviations."""
     t = np.array([_stamp(s.header) for s in statuses])
     margin = np.array([s.margin for s in statuses]) - robot_radius
-    legs = leg_margins(statuses)
-    tubes = leg_tubes(statuses)
+    legs = safety_legs(statuses)
     fig, ax = plt.subplots(figsize=(9, 4))
     ax.plot(t, margin, color='tab:blue', lw=1.2, label='margin (obstacles grown by, - radius)')
     if legs:
-        starts = np.array([r[0] for r in legs] + [t[-1]])
-        in_force = np.array([r[1] for r in legs])
-        dev = np.array([r[2] for r in legs])
+        starts = np.array([leg.start for leg in legs] + [t[-1]])
+        in_force = np.array([leg.margin for leg in legs])
+        dev = np.array([leg.deviation for leg in legs])
         ax.hlines(in_force, starts[:-1], starts[1:], color='tab:green', lw=2,
                   label='margin in force at the leg start'
-                  + (' (calibrated)' if any(s != 1.0 for _, s in tubes) else ''))
-        tube = np.array([p for p, _ in tubes])
-        if len(tube) == len(in_force) and (tube > 0).any():
+                  + (' (calibrated)' if any(leg.scale != 1.0 for leg in legs) else ''))
+        tube = np.array([leg.tube for leg in legs])
+        if (tube > 0).any():
             # learned_bound: the uncalibrated tube each leg was predicted at its start; the
             # calibrated margin is it times the scale (docs/margins.md §10).
             has = tube > 0
@@ -127,7 +94,7 @@ def plot_margins(statuses: list[Any], robot_radius: float, path: pathlib.Path) -
         ax.plot(mid[miss], dev[miss], 'x', color='tab:red', ms=7, mew=2,
                 label=f'above its margin ({int(miss.sum())} of {len(dev)} legs)')
     mode = statuses[-1].margin_mode if statuses else ''
-    scale = (f', last scale {tubes[-1][1]:.2f}' if tubes and any(p > 0 for p, _ in tubes)
+    scale = (f', last scale {legs[-1].scale:.2f}' if any(leg.tube > 0 for leg in legs)
              else '')
     ax.set_title(f'safety margin ({mode}{scale}) against the realised deviations', fontsize=10)
     ax.set_xlabel('t (s)')
@@ -185,14 +152,14 @@ def margins_summary(recording: pathlib.Path, scenario: Any, robot_radius: float,
     ``scenario``: the recorded scenario, parsed (:func:`rrtq_bringup.run_data.recorded_scenario`),
     for the true field; None skips ``field.png``.
     """
-    statuses = _messages(recording, topics.SAFETY_STATUS)
+    statuses = messages(recording, topics.SAFETY_STATUS)
     if not statuses:
         return None
     plot_margins(statuses, robot_radius, out / 'margins.png')
-    legs = leg_margins(statuses)
+    legs = safety_legs(statuses)
     summary: dict[str, Any] = {
         'mode': statuses[-1].margin_mode, 'legs': len(legs),
-        'violations': int(sum(d > m for _, m, d in legs)),
+        'violations': int(sum(leg.deviation > leg.margin for leg in legs)),
         'mean_margin_m': float(np.mean([s.margin for s in statuses]) - robot_radius)}
     estimates = read_estimates(recording) if scenario is not None else []
     if estimates:
