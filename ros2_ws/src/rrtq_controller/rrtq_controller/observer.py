@@ -102,10 +102,14 @@ class OneStepModel:
         return np.asarray(_lagged(u, lags) @ self.gammas.transpose(0, 2, 1).reshape(-1, self.phi.shape[0]),
                           dtype=float)
 
-    def equivalent_input(self, x0: Array, x1: Array) -> Array:
-        """u_eff = Γ⁺(x̄1 - Φ x̄0) for batches (N, n): the force that explains each step."""
-        return np.asarray(np.linalg.lstsq(self.gamma, (x1 - x0 @ self.phi.T).T, rcond=None)[0].T,
-                          dtype=float)
+    def equivalent_input(self, x0: Array, x1: Array, forced: Array | None = None) -> Array:
+        """u_eff = Γ⁺(x̄1 - Φ x̄0 - f) for batches (N, n): the force that explains each step.
+
+        ``forced`` f (N, n): the forces' part of the steps (:meth:`forced`), taken off first:
+        then what is left is the matched push (:meth:`Observer.last_push`).
+        """
+        e = x1 - x0 @ self.phi.T if forced is None else x1 - x0 @ self.phi.T - forced
+        return np.asarray(np.linalg.lstsq(self.gamma, e.T, rcond=None)[0].T, dtype=float)
 
 
 class Observer:
@@ -141,6 +145,8 @@ class Observer:
         self.variance = np.zeros(n)
         """Variance of each state's measurement (the odometry's covariance diagonal)."""
         self.model: OneStepModel | None = None
+        self._push_noise: tuple[OneStepModel, float, bytes, Array] | None = None
+        """:meth:`push_noise`'s last (model, a, variance, value): it changes with them only."""
         self._smoothed: Array | None = None
         self._acted = np.zeros((0, m))
         self._smoothed_segment = np.zeros(0, dtype=np.int64)
@@ -315,9 +321,9 @@ class Observer:
         last = self.steps - 1
         forces = np.array([self._u[(last - j) % self.memory] if last - j >= 0
                            else np.zeros(self.m) for j in range(model.gammas.shape[0])])
-        e = (np.asarray(y_next, dtype=float) - model.phi @ self._y[last % self.memory]
-             - np.einsum('jnm,jm->n', model.gammas, forces))
-        return np.asarray(np.linalg.lstsq(model.gamma, e, rcond=None)[0], dtype=float)
+        forced = np.einsum('jnm,jm->n', model.gammas, forces)
+        return model.equivalent_input(self._y[last % self.memory][None],
+                                      np.asarray(y_next, dtype=float)[None], forced[None])[0]
 
     def pushes(self) -> tuple[Array, NDArray[np.int64]] | None:
         """The matched push of every kept transition within a segment, read as :meth:`last_push` reads.
@@ -330,10 +336,9 @@ class Observer:
         if model is None or not model.gamma_error < 1.0:
             return None
         y, u, segment, first = self._ordered()
-        e = y[1:] - y[:-1] @ model.phi.T - model.forced(u)[:-1]
         same = np.flatnonzero(segment[1:] == segment[:-1])
-        push = np.linalg.lstsq(model.gamma, e[same].T, rcond=None)[0].T
-        return np.asarray(push, dtype=float), same + first
+        push = model.equivalent_input(y[same], y[same + 1], model.forced(u)[same])
+        return push, same + first
 
     def push_noise(self, a: float) -> Array:
         """Standard deviation, from the odometry's noise alone, of :meth:`last_push` low-passed.
@@ -347,6 +352,14 @@ class Observer:
         """
         if self.model is None or not self.noisy:
             return np.zeros(self.m)
+        cached, variance = self._push_noise, self.variance.tobytes()
+        if cached is None or not (cached[0] is self.model and cached[1] == a
+                                  and cached[2] == variance):   # once per model
+            cached = self._push_noise = (self.model, a, variance, self._push_noise_of(a))
+        return cached[3].copy()
+
+    def _push_noise_of(self, a: float) -> Array:
+        assert self.model is not None
         R = np.diag(self.variance)
         P = np.linalg.pinv(self.model.gamma)
         b = 1.0 - a
