@@ -199,15 +199,10 @@ class Observer:
         regress = np.hstack([x[:-1], lagged[:-1], np.ones((len(x) - 1, 1))])
         target = x[1:]
         same = segment[1:] == segment[:-1]
-        usable = same.copy()              # and the p transitions before in the same segment
-        for i in range(1, p + 1):
-            usable[i:] &= same[:-i] & (segment[1 + i:] == segment[1:-i])
-            usable[:i] = False
-        usable[:J] = False                # the lags of the first steps are unknown
+        usable = _with_the_p_before(same, p)   # and the p transitions before in the segment
+        usable[:max(p, J)] = False        # the p before, and the lags, of the first unknown
         if fits is not None:              # and none of them kept out (Observer.record)
-            fitted = fits[:-1].copy()
-            for i in range(1, p + 1):
-                fitted[i:] &= fits[:-1][:-i]
+            fitted = _with_the_p_before(fits[:-1], p)
             usable &= fitted
             same = same & fitted
         if usable.sum() < 10 * regress.shape[1]:
@@ -537,6 +532,14 @@ class PushCanceller:
         predicted = self.prediction()
         shrunk = np.sign(predicted) * np.maximum(np.abs(predicted) - allowance, 0.0)
         return np.asarray(-shrunk, dtype=float)
+
+
+def _with_the_p_before(ok: NDArray[np.bool_], p: int) -> NDArray[np.bool_]:
+    """Where ``ok`` holds at a transition and at the ``p`` before it (those it has)."""
+    out = np.asarray(ok, dtype=bool).copy()
+    for i in range(1, p + 1):
+        out[i:] &= ok[:-i]
+    return out
 
 
 def _lagged(u: Array, lags: int) -> Array:
