@@ -108,7 +108,9 @@ class OneStepModel:
         ``forced`` f (N, n): the forces' part of the steps (:meth:`forced`), taken off first:
         then what is left is the matched push (:meth:`Observer.last_push`).
         """
-        e = x1 - x0 @ self.phi.T if forced is None else x1 - x0 @ self.phi.T - forced
+        e = x1 - x0 @ self.phi.T
+        if forced is not None:
+            e = e - forced
         return np.asarray(np.linalg.lstsq(self.gamma, e.T, rcond=None)[0].T, dtype=float)
 
 
