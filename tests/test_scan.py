@@ -7,8 +7,11 @@ import pytest
 import shapely
 
 from rrtq_common.scan import PerceptionConfig, beam_angles, beam_directions, period_steps
+from rrtq_common.world import ObstacleSpec
 from rrtq_planner.obstacle_map import MapEvent, MapperConfig, ObstacleMap, segment
-from rrtq_sim.scan import LaserScanner, cast_rays
+from rrtq_sim.mujoco_model import BaseParameters
+from rrtq_sim.mujoco_rays import MujocoRays
+from rrtq_sim.scan import LaserScanner, cast_rays, polygon_rays
 
 SQUARE = np.array([[2.0, -1.0], [4.0, -1.0], [4.0, 1.0], [2.0, 1.0]])
 
@@ -52,7 +55,7 @@ def test_side_faces_and_range_limit():
 
 def test_seeded_noise_repeats_and_has_its_sigma():
     config = PerceptionConfig(beams=360, range_max=10.0, noise_std=0.05)
-    scans = [LaserScanner(config, np.random.default_rng(seed)).scan([0.0, 0.0], [SQUARE])
+    scans = [LaserScanner(config, np.random.default_rng(seed)).scan([0.0, 0.0], [ObstacleSpec('square', SQUARE)])
              for seed in (3, 3, 4)]
     np.testing.assert_array_equal(scans[0], scans[1])
     assert not np.array_equal(scans[0], scans[2])
@@ -61,9 +64,79 @@ def test_seeded_noise_repeats_and_has_its_sigma():
     # Many scans: the error's spread is the configured sigma.
     scanner = LaserScanner(config, np.random.default_rng(0))
     finite = np.isfinite(exact)
-    errors = np.concatenate([scanner.scan([0.0, 0.0], [SQUARE])[finite] - exact[finite]
+    errors = np.concatenate([scanner.scan([0.0, 0.0], [ObstacleSpec('square', SQUARE)])[finite] - exact[finite]
                              for _ in range(200)])
     assert abs(errors.std() - 0.05) < 0.005 and abs(errors.mean()) < 0.005
+
+
+# An L (non-convex: MuJoCo holds it as the prisms of its triangles) and a disc.
+L_SHAPE = np.array([[-5.0, -5.0], [-2.0, -5.0], [-2.0, -4.0], [-4.0, -4.0], [-4.0, -2.0],
+                    [-5.0, -2.0]])
+DISC = np.array([[1.0 + 0.8 * math.cos(a), 4.0 + 0.8 * math.sin(a)]
+                 for a in np.linspace(0.0, 2.0 * math.pi, 16, endpoint=False)])
+WORLD = [ObstacleSpec('square', SQUARE), ObstacleSpec('l', L_SHAPE), ObstacleSpec('disc', DISC)]
+
+
+@pytest.mark.parametrize('origin', [(0.0, 0.0), (-3.0, -3.0), (3.0, 3.5), (-1.5, 2.0)])
+def test_mujoco_rays_equal_the_polygon_caster(origin):
+    """mj_multiRay in the plant's model against the analytic caster: the same beams hit,
+    at the same ranges but for MuJoCo's single-precision mesh vertices; the robot's own
+    cylinder (0.4 m, the origin inside it) is never seen."""
+    rays = MujocoRays(WORLD, BaseParameters(40.0, 45.0, 0.0, 0.4))
+    directions = beam_directions(720)
+    # A beam through a vertex (within 1e-6 rad) may graze either way: those are left out.
+    vertices = np.concatenate([spec.polygon for spec in WORLD]) - np.asarray(origin)
+    towards = np.arctan2(vertices[:, 1], vertices[:, 0])
+    gap = np.angle(np.exp(1j * (beam_angles(720)[:, None] - towards[None, :])))
+    clear = np.abs(gap).min(axis=1) > 1e-6
+    for range_max in (3.0, 12.0):
+        ours = rays(origin, directions, WORLD, range_max)
+        reference = polygon_rays(origin, directions, WORLD, range_max)
+        hit = np.isfinite(reference) & clear
+        assert hit.any()
+        np.testing.assert_array_equal(np.isfinite(ours)[clear], hit[clear])
+        np.testing.assert_allclose(ours[hit], reference[hit], rtol=0.0, atol=1e-6)
+        assert np.all(ours[hit] > 0.4)
+
+
+def test_mujoco_rays_see_only_the_obstacles_that_exist():
+    rays = MujocoRays(WORLD, BaseParameters(40.0, 45.0, 0.0, 0.4))
+    directions = beam_directions(360)
+    present = [WORLD[1], WORLD[2]]
+    np.testing.assert_allclose(rays((0.0, 0.0), directions, present, 12.0),
+                               polygon_rays((0.0, 0.0), directions, present, 12.0), atol=1e-6)
+    assert np.all(np.isinf(rays((0.0, 0.0), directions, [], 12.0)))
+    # Back again: the square is seen once it exists.
+    again = rays((0.0, 0.0), directions, WORLD, 12.0)
+    np.testing.assert_allclose(again, polygon_rays((0.0, 0.0), directions, WORLD, 12.0),
+                               atol=1e-6)
+
+
+def test_mujoco_rays_see_a_users_own_walls_but_not_its_robot(tmp_path):
+    """A user's MJCF: a wall of the file is seen (it is part of the physical world), the
+    robot's parts below its base body are not."""
+    mjcf = tmp_path / 'robot.xml'
+    mjcf.write_text("""<mujoco>
+  <option gravity="0 0 0"/>
+  <worldbody>
+    <geom name="wall" type="box" pos="0 -6 0" size="10 0.5 1"/>
+    <body name="base" pos="0 0 0.1">
+      <joint name="x" type="slide" axis="1 0 0"/>
+      <joint name="y" type="slide" axis="0 1 0"/>
+      <geom type="cylinder" size="0.3 0.1" mass="20"/>
+      <body name="bumper" pos="0.5 0 0"><geom type="box" size="0.1 0.3 0.05" mass="1"/></body>
+    </body>
+  </worldbody>
+  <actuator><motor name="fx" joint="x"/><motor name="fy" joint="y"/></actuator>
+</mujoco>""")
+    rays = MujocoRays([], mjcf=str(mjcf))
+    directions = np.array([[1.0, 0.0], [0.0, -1.0], [0.0, 1.0]])
+    ranges = rays((0.0, 0.0), directions, [], 10.0)
+    assert np.isinf(ranges[0])                       # the bumper is the robot's own
+    assert ranges[1] == pytest.approx(5.5, abs=1e-9)  # the wall's face at y = -5.5
+    assert np.isinf(ranges[2])
+    # Moved 2 m toward the wall: the base's position is where the rays start.
+    assert rays((0.0, -2.0), directions, [], 10.0)[1] == pytest.approx(3.5, abs=1e-9)
 
 
 def test_scan_period_must_be_whole_steps():
@@ -276,6 +349,21 @@ def test_the_graph_starts_the_mapper_only_for_scans(tmp_path):
     assert mapper.publishes == (topics.PERCEPTION_STATUS,)
     assert topics.PERCEPTION_STATUS not in spawner.publishes and topics.SCAN in spawner.publishes
     assert topics.SCAN in scan['recorder'].subscribes
+
+
+def test_the_physics_plants_scanner_casts_in_its_model(tmp_path):
+    """With plant.model mujoco the spawner is told the plant's model and file, and builds
+    MuJoCo's caster (mj_multiRay) rather than the polygon one."""
+    from rrtq_bringup.graph import build_graph
+    from rrtq_bringup.scenario import load_scenario
+    path = tmp_path / 'm.yaml'
+    path.write_text('bounds: {x: [-5, 5], y: [-5, 5]}\nstart: [-4, -4]\ngoal: [4, 4]\n'
+                    'plant: {model: mujoco}\nperception: {source: scan}\n')
+    spawner = {s.name: s for s in build_graph(load_scenario(path), 0.0,
+                                               str(tmp_path / 'r.mcap'))}['obstacle_spawner']
+    assert spawner.params['model'] == 'mujoco' and spawner.params.get('mjcf') in ('', None)
+    linear, _ = _graph(tmp_path, '{source: scan}')
+    assert 'model' not in linear['obstacle_spawner'].params
 
 
 # -- closed loop --------------------------------------------------------------------------

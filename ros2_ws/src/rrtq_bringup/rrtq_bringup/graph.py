@@ -45,6 +45,7 @@ from rrtq_planner.obstacle_map import MapperConfig
 from rrtq_planner.guidance import GuidanceMode
 from rrtq_sim.disturbance import DisturbanceModel
 from rrtq_sim.plant import PlantModel
+from rrtq_sim.scan import ScanWorld
 from rrtq_sim.simulation import SimulatorConfig
 
 STEP_TOPICS = (topics.CLOCK, topics.ODOM, topics.ODOM_TRUTH, topics.CMD_FORCE,
@@ -109,8 +110,11 @@ def build_graph(scenario: Scenario, speed: float, output: str,
         + ((topics.CONTROLLER_STATE,) if worst_case else ()),
         publishes=(topics.DISTURBANCE,))
     scan = scenario.perception.source is PerceptionSource.SCAN
+    physics = plant.model is PlantModel.MUJOCO
     spawner = NodeSpec('obstacle_spawner', 'rrtq_sim.spawner_node', 'SpawnerNode',
-                       {**sim_time, **world, **(only(run, 'dt', 'seed') if scan else {})},
+                       {**sim_time, **world, **(only(run, 'dt', 'seed') if scan else {}),
+                        **(to_parameters(ScanWorld(plant.model, plant.mjcf))
+                           if scan and physics else {})},
                        subscribes=clock + (topics.ODOM_TRUTH,),
                        publishes=((topics.SCAN,) if scan else (topics.PERCEPTION_STATUS,))
                        + (topics.REFEREE_STATUS,))
@@ -181,7 +185,6 @@ def build_graph(scenario: Scenario, speed: float, output: str,
                                 wait_for=wait_for, ready_from=tuple(announcing))
     # The physics plant also builds its obstacles from the scenario file; the linear plants
     # need only their matrices.
-    physics = plant.model is PlantModel.MUJOCO
     plant_params = (to_parameters(plant, exclude=('stiffness',) + (('damping',) if plant.mjcf
                                                                      else ()))
                     if physics else to_parameters(plant, exclude=(

@@ -31,7 +31,7 @@ from rrtq_common.world import ObstacleSpec
 
 __all__ = ['BASE_BODY', 'GRAVITY', 'ACTUATORS', 'SLIDE_JOINTS', 'MIN_RADIUS', 'PRISM_Z',
            'SUBSTEPS', 'coulomb_force', 'BaseParameters', 'MjcfError', 'base_mjcf', 'obstacle_pieces', 'build_model',
-           'obstacle_geom_name']
+           'obstacle_geom_name', 'planar_dofs', 'robot_geoms']
 
 BASE_BODY = 'base'
 """The body whose world position is the robot's (x, y)."""
@@ -214,3 +214,29 @@ def build_model(obstacles: Sequence[ObstacleSpec], timestep: float,
         raise MjcfError(f'{source}: does not compile ({exc})') from None
     _check_parts(model, source)
     return model
+
+
+def planar_dofs(model: mujoco.MjModel, body: int) -> tuple[list[int], list[int]]:
+    """The qpos and qvel addresses of ``body``'s x and y: its slide joints, else its free joint."""
+    joints = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in SLIDE_JOINTS]
+    if all(j >= 0 and model.jnt_bodyid[j] == body
+           and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE for j in joints):
+        return ([int(model.jnt_qposadr[j]) for j in joints],
+                [int(model.jnt_dofadr[j]) for j in joints])
+    free = next(j for j in range(model.njnt) if model.jnt_bodyid[j] == body
+                and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
+    qpos, dof = int(model.jnt_qposadr[free]), int(model.jnt_dofadr[free])
+    return [qpos, qpos + 1], [dof, dof + 1]
+
+
+def robot_geoms(model: mujoco.MjModel, body: int) -> frozenset[int]:
+    """The geoms of ``body`` and of every body below it (the robot's own parts)."""
+
+    def below(b: int) -> bool:
+        while b > 0:
+            if b == body:
+                return True
+            b = int(model.body_parentid[b])
+        return False
+
+    return frozenset(g for g in range(model.ngeom) if below(int(model.geom_bodyid[g])))

@@ -26,9 +26,9 @@ import numpy as np
 import numpy.typing as npt
 
 from rrtq_common.world import ObstacleSpec
-from rrtq_sim.mujoco_model import (ACTUATORS, BASE_BODY, SLIDE_JOINTS, SUBSTEPS,
-                                   BaseParameters, build_model, obstacle_geom_name,
-                                   obstacle_pieces)
+from rrtq_sim.mujoco_model import (ACTUATORS, BASE_BODY, SUBSTEPS, BaseParameters,
+                                   build_model, obstacle_geom_name, obstacle_pieces,
+                                   planar_dofs, robot_geoms)
 
 __all__ = ['MujocoPlant']
 
@@ -82,14 +82,12 @@ class MujocoPlant:
         self._body = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, BASE_BODY)
         self._actuators = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
                            for name in ACTUATORS]
-        self._qpos, self._qvel = self._planar_dofs()
+        self._qpos, self._qvel = planar_dofs(model, self._body)
         self.mass = float(model.body_subtreemass[self._body])
         mujoco.mj_forward(model, self.data)
         # World position of the base at the joints' zero: position = offset + qpos.
         self._offset = self.data.xpos[self._body][:2] - self.data.qpos[self._qpos]
-        self._robot_geoms = frozenset(
-            g for g in range(model.ngeom)
-            if self._descends_from_base(int(model.geom_bodyid[g])))
+        self._robot_geoms = robot_geoms(model, self._body)
         self._geom_obstacle: dict[int, str] = {}
         self._obstacle_geoms: dict[str, list[int]] = {}
         for obstacle in obstacles:
@@ -106,26 +104,6 @@ class MujocoPlant:
         """Ids of the obstacles the robot touched during the last step (sorted; empty: none)."""
         self.contact_steps = 0
         """Steps during which the robot touched an obstacle."""
-
-    def _descends_from_base(self, body: int) -> bool:
-        while body > 0:
-            if body == self._body:
-                return True
-            body = int(self.model.body_parentid[body])
-        return False
-
-    def _planar_dofs(self) -> tuple[list[int], list[int]]:
-        """The qpos and qvel addresses of the base's x and y (slide joints, else its free joint)."""
-        model = self.model
-        joints = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in SLIDE_JOINTS]
-        if all(j >= 0 and model.jnt_bodyid[j] == self._body
-               and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE for j in joints):
-            return ([int(model.jnt_qposadr[j]) for j in joints],
-                    [int(model.jnt_dofadr[j]) for j in joints])
-        free = next(j for j in range(model.njnt) if model.jnt_bodyid[j] == self._body
-                    and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE)
-        qpos, dof = int(model.jnt_qposadr[free]), int(model.jnt_dofadr[free])
-        return [qpos, qpos + 1], [dof, dof + 1]
 
     # -- the Plant interface ----------------------------------------------------
     @property

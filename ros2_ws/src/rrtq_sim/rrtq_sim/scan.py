@@ -8,14 +8,22 @@ the returns; a noisy return past ``range_max`` reads ``+inf`` too, one below 0 r
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from rrtq_common.scan import PerceptionConfig, beam_directions
+from rrtq_common.settings import setting
+from rrtq_common.world import ObstacleSpec
+from rrtq_sim.plant import PlantModel
 
-__all__ = ['cast_rays', 'LaserScanner']
+__all__ = ['cast_rays', 'RayCaster', 'polygon_rays', 'ScanWorld', 'LaserScanner']
+
+RayCaster = Callable[[npt.ArrayLike, np.ndarray, Sequence[ObstacleSpec], float], np.ndarray]
+"""``(origin, directions (N, 2), existing obstacles, range_max) -> ranges (N,)``, m;
+``+inf`` for a ray that meets nothing within ``range_max``."""
 
 
 def _edges(polygons: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -73,6 +81,26 @@ def cast_rays(origin: npt.ArrayLike, directions: np.ndarray,
     return ranges
 
 
+def polygon_rays(origin: npt.ArrayLike, directions: np.ndarray,
+                 obstacles: Sequence[ObstacleSpec], range_max: float) -> np.ndarray:
+    """:func:`cast_rays` against the obstacles whose bounding box comes within ``range_max``."""
+    p = np.asarray(origin, dtype=float).reshape(2)
+    r = float(range_max)
+    near = [spec.polygon for spec in obstacles
+            if np.all(spec.polygon.min(axis=0) - r <= p) and np.all(p <= spec.polygon.max(axis=0) + r)]
+    return cast_rays(p, directions, near, r)
+
+
+@dataclass(frozen=True)
+class ScanWorld:
+    """What the scanner casts its rays in: the plant's world (the plant section's keys)."""
+
+    model: PlantModel = setting(PlantModel.ROVER, doc='plant family; mujoco: rays cast by '
+                                'mj_multiRay in the MuJoCo model the plant steps')
+    mjcf: str | None = setting(None, doc="mujoco: the user's MJCF file (none: the shipped "
+                               'planar base)')
+
+
 class LaserScanner:
     """The scanner of a scenario's ``perception:`` section, with its own noise generator.
 
@@ -82,26 +110,28 @@ class LaserScanner:
         Beams, ``range_max`` (must be set) and ``noise_std``.
     rng : numpy.random.Generator
         The noise's generator (seeded by the run: the same seed, the same scans).
+    caster : RayCaster
+        What casts the rays: :func:`polygon_rays` (the default) or the MuJoCo plant's
+        :class:`rrtq_sim.mujoco_rays.MujocoRays`.
     """
 
-    def __init__(self, config: PerceptionConfig, rng: np.random.Generator) -> None:
+    def __init__(self, config: PerceptionConfig, rng: np.random.Generator,
+                 caster: RayCaster = polygon_rays) -> None:
         if config.range_max is None:
             raise ValueError('range_max must be set (the loader defaults it)')
         self.config = config
         self.range_max = float(config.range_max)
         self.directions = beam_directions(config.beams)
         self._rng = rng
+        self._cast = caster
 
-    def scan(self, position: npt.ArrayLike, polygons: Sequence[np.ndarray]) -> np.ndarray:
-        """The ranges (m) seen from ``position`` (m), noise included; ``+inf``: no return.
+    def scan(self, position: npt.ArrayLike, obstacles: Sequence[ObstacleSpec]) -> np.ndarray:
+        """The ranges (m) from ``position`` (m) among the existing ``obstacles``, noise in.
 
-        Only polygons whose bounding box comes within ``range_max`` are intersected.
+        ``+inf``: no return.
         """
-        p = np.asarray(position, dtype=float).reshape(2)
         r = self.range_max
-        near = [poly for poly in polygons
-                if np.all(poly.min(axis=0) - r <= p) and np.all(p <= poly.max(axis=0) + r)]
-        ranges = cast_rays(p, self.directions, near, r)
+        ranges = self._cast(position, self.directions, obstacles, r)
         # One draw per beam on every scan, returns or not: the noise of a beam does not
         # depend on what the others see.
         noise = self._rng.normal(0.0, 1.0, len(ranges)) * self.config.noise_std

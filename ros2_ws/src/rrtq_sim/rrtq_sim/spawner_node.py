@@ -16,7 +16,8 @@ ends with /referee/status: the robot's true clearance to what exists and to the 
 
 With ``perception.source: scan`` the spawner hands the robot no polygons: on every step a
 scan is due (``perception.rate``) it casts the scanner's rays from the true position
-against what exists (:class:`rrtq_sim.scan.LaserScanner`) and publishes /scan; the robot's
+against what exists (:class:`rrtq_sim.scan.LaserScanner`; with the MuJoCo plant, MuJoCo's
+``mj_multiRay`` in the plant's model) and publishes /scan; the robot's
 obstacle mapper writes /obstacles/detected and /perception/status.
 """
 
@@ -42,9 +43,12 @@ from rrtq_common.scan import PerceptionSource, period_steps, scan_due
 from rrtq_common.world import ObstacleSpec, TrueObstacles
 from rrtq_common.world_yaml import WorldSource, load_world
 from rrtq_sim.conversions import perception_status_msg, referee_status_msg
+from rrtq_sim.mujoco_model import BaseParameters
+from rrtq_sim.mujoco_rays import MujocoRays
 from rrtq_sim.perception import Observation, Perception
+from rrtq_sim.plant import PlantModel
 from rrtq_sim.referee import Referee
-from rrtq_sim.scan import LaserScanner
+from rrtq_sim.scan import LaserScanner, RayCaster, ScanWorld, polygon_rays
 
 SCAN_STREAM = 0x5CA7
 """Mixed into the run's seed for the scan noise: not the stream of any other node's noise."""
@@ -69,8 +73,14 @@ class SpawnerNode(Node):
         self.scanner: LaserScanner | None = None
         if world.perception.source is PerceptionSource.SCAN:
             run = declare_config(self, RunConfig, exclude=('lockstep',))
+            plant = declare_config(self, ScanWorld)
+            # The physics plant's scan is MuJoCo's, in its own model (the base's mass,
+            # damping and friction do not change what a ray meets).
+            caster: RayCaster = (
+                MujocoRays(world.obstacles, BaseParameters(1.0, 0.0, 0.0, world.robot_radius),
+                           plant.mjcf) if plant.model is PlantModel.MUJOCO else polygon_rays)
             self.scanner = LaserScanner(world.perception,
-                                        np.random.default_rng([run.seed, SCAN_STREAM]))
+                                        np.random.default_rng([run.seed, SCAN_STREAM]), caster)
             self.scan_period = period_steps(world.perception.rate, run.dt)
             self.dt_ns = seconds_to_ns(run.dt)
             self.scan_pub = self.create_publisher(LaserScan, topics.SCAN, qos.STREAM)
@@ -114,7 +124,7 @@ class SpawnerNode(Node):
         if not scan_due(step.stamp_ns, self.dt_ns, self.scan_period):
             self.gate.answered(step.stamp_ns)
             return
-        ranges = self.scanner.scan(position, [spec.polygon for spec in existing])
+        ranges = self.scanner.scan(position, existing)
         scan = conv.laser_scan_msg(step.stamp_ns, ranges, self.scanner.config)
         self.gate.answered(step.stamp_ns, scan)
         self.scan_pub.publish(scan)
