@@ -35,6 +35,19 @@ class Variant(enum.StrEnum):
     sparse-GP compensation, tracking the guidance reference (``rrtq_controller.vf_lpc``)."""
 
 
+class PushLaw(enum.StrEnum):
+    """What the push feed-forward (``push_feedforward``) adds to the policy's force."""
+
+    OPTIMAL = 'optimal'
+    """The LQ-optimal feed-forward of the push the identified model predicts: its internal
+    model (a constant and the AR part) estimated from the reads by a Kalman filter, times the
+    gain of the certainty-equivalent LQ problem (:mod:`rrtq_controller.push_feedforward`)."""
+
+    CANCEL = 'cancel'
+    """Minus the predicted push (α + β times the low-pass filtered reads,
+    :class:`rrtq_controller.observer.PushCanceller`): the whole predictable push cancelled."""
+
+
 class CriticLaw(enum.StrEnum):
     """How the critic weights are tuned from the integral Bellman equations."""
 
@@ -204,6 +217,12 @@ class ControllerConfig:
     forward (nothing of a white push). Off by default: under odometry noise a push read at
     rest through a model biased by errors in variables pushed a robot out of the bounds,
     and on a plant with Coulomb friction it winds up or never starts (docs/observer.md §6)."""
+    push_feedforward_law: PushLaw = setting(PushLaw.OPTIMAL, doc='push_feedforward: optimal '
+                                            '(the LQ-optimal feed-forward of the predicted '
+                                            'push) | cancel (minus the predicted push)')
+    """Against a steady push the two agree (the whole push, integral action); against a
+    periodic one cancelling costs more than letting it act, the LQ-optimal one about half
+    of what the feedback alone pays (``test_lq_feedforward.py``)."""
     push_filter_time: float = setting(0.25, low=0.0, low_open=True, unit='s',
                                       doc='push_feedforward: time constant of the low-pass '
                                       'filter of the push')

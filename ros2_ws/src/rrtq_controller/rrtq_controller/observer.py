@@ -390,19 +390,32 @@ class Observer:
         floor leaves room for one that is not quite).
         """
         n = self.n
-        R = np.diag(self.variance)
         same = segment[1:] == segment[:-1]
         same[:self.lags] = False
         e = (y[1:] - y[:-1] @ model.phi.T - model.forced(u)[:-1])[same]
         pinv = np.linalg.pinv(model.gamma)
         w = e @ pinv.T
-        noise = pinv @ (R + model.phi @ R @ model.phi.T) @ pinv.T
+        noise = self.read_noise(model)
         Qw = np.atleast_2d(np.cov(w.T)) - noise
         floor = math.sqrt(2.0 / max(len(w), 1)) * float(np.trace(noise + Qw)) / self.m
         vals, vecs = np.linalg.eigh(0.5 * (Qw + Qw.T))
         Qw = (vecs * np.maximum(vals, floor)) @ vecs.T
         G = model.gamma
         return np.asarray(G @ Qw @ G.T + 1e-12 * np.eye(n), dtype=float)
+
+    def read_noise(self, model: OneStepModel | None = None) -> Array:
+        """The covariance (m x m, N²) the odometry's noise puts into one read push.
+
+        A read is Γ⁺ e with e = n_{k+1} - Φ n_k + Γ w: Γ⁺ (R + Φ R Φᵀ) Γ⁺ᵀ, R the
+        measurement covariance (zeros with exact odometry). ``model``: by default the
+        current one (zeros before a model).
+        """
+        model = self.model if model is None else model
+        if model is None:
+            return np.zeros((self.m, self.m))
+        R = np.diag(self.variance)
+        pinv = np.linalg.pinv(model.gamma)
+        return np.asarray(pinv @ (R + model.phi @ R @ model.phi.T) @ pinv.T, dtype=float)
 
     def _smooth(self, model: OneStepModel, Q: Array, y: Array, u: Array,
                 segment: NDArray[np.int64]) -> Array:

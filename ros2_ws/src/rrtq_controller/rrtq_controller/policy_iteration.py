@@ -23,6 +23,7 @@ from .config import SafeHold
 from .critic import Fit, LeastSquaresCritic, fit, residual
 from .guard import FALSE_ALARM, Brake, PolicyEvent, Sensing, held_below, trust_step
 from .observer import Observer, PushCanceller
+from .push_feedforward import PushFeedforward
 from .readout import WeightReadout
 from .rollout import AwayFrom, Rollout
 
@@ -52,6 +53,7 @@ class PolicyIteration(WeightReadout):
     _since_eval: int
     _steady: Array
     _canceller: PushCanceller | None
+    _forward: PushFeedforward | None
     _braking_sense: Sensing
     _target: tuple[Array, Array]
     _initial: tuple[Array, Array]
@@ -128,6 +130,9 @@ class PolicyIteration(WeightReadout):
             self._steady = np.where(np.abs(mean) > z * error, mean, 0.0)
             if self._canceller is not None:     # what of the push can be predicted, and how
                 self._canceller.fit(self.observer.pushes(), model.delay + 1)
+            if self._forward is not None:       # its internal model and LQ gain
+                self._forward.fit(model.phi, model.gamma, model.ar, self.observer.pushes(),
+                                  self.observer.read_noise(), model.delay + 1)
         if isinstance(self.critic, LeastSquaresCritic):
             self.critic.evaluate(self._rows)
         else:

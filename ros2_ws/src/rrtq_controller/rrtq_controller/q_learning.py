@@ -28,10 +28,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .basis import QuadraticBasis, TimeBasis
-from .config import ActorLaw, ControllerConfig, StepInfo, Variant
+from .config import ActorLaw, ControllerConfig, PushLaw, StepInfo, Variant
 from .critic import LeastSquaresCritic, make_critic
 from .guard import FALSE_ALARM, Brake, DivergenceWatch, KeepOff, PolicyEvent, Sensing, face_ahead
 from .observer import Observer, PushCanceller
+from .push_feedforward import PushFeedforward
 from .policy_iteration import PolicyIteration
 from .probing import Probing
 from .readout import _features
@@ -129,9 +130,13 @@ class QLearningController(PolicyIteration):
                          if c.observes else None)
         """The one-step model the critic learns through (:mod:`observer`); None: the rows take
         the odometry and the commanded force as they are."""
+        law = c.push_feedforward_law
         self._canceller = (PushCanceller(m, c.dt, c.push_filter_time, FALSE_ALARM)
-                           if c.cancels_push else None)
-        """The disturbance-observer feed-forward (``push_feedforward``); None: off."""
+                           if c.cancels_push and law is PushLaw.CANCEL else None)
+        """The cancelling push feed-forward (``push_feedforward_law: cancel``); None: not it."""
+        self._forward = (PushFeedforward(m, c.dt, c.M, c.R, FALSE_ALARM)
+                         if c.cancels_push and law is PushLaw.OPTIMAL else None)
+        """The LQ-optimal push feed-forward (``push_feedforward_law: optimal``); None: not it."""
         self._rollout_of = None
         """The guard's rollouts of the observer's current model (:mod:`rollout`), built once
         per model."""
@@ -287,6 +292,9 @@ class QLearningController(PolicyIteration):
             # the step that just ended, if it was one Δt (a free-running robot side can skip
             # ticks, and over a gap the model's one step does not hold)
             self._canceller.update(self.observer.last_push(x))
+        if (self._prev is not None and self._forward is not None and self.observer is not None
+                and abs(t - self._prev_t - self.config.dt) < 0.5 * self.config.dt):
+            self._forward.update(self.observer.last_push(x))
         if self._prev is not None:
             measured = d_applied is not None and self.q > 0 and self.config.reads_disturbance
             d_prev = np.asarray(d_applied, dtype=float) if measured else self._d_out
@@ -309,6 +317,8 @@ class QLearningController(PolicyIteration):
         feedforward = np.zeros(self.m)
         if self._canceller is not None and self.observer is not None:
             feedforward = self._canceller.force(self.observer.push_noise(self._canceller.a))
+        elif self._forward is not None:
+            feedforward = self._forward.force()
         if self._braking:
             noise = np.zeros(self.m)
             u = np.clip(self._brake(x, self.m), -limit, limit)
@@ -335,7 +345,7 @@ class QLearningController(PolicyIteration):
             # collinearity no regression can split) at a position that hardly moves, and the
             # model fitted across a hold took a spring the rover has not (256 N/m), through
             # which it read a 580 N push at rest; the rows still learn from the step
-            fits = not (self._braking and self._canceller is not None)
+            fits = not (self._braking and self.config.cancels_push)
             self._step_id = self.observer.record(x, u, self._segment, fits)
         events, self._events = self._events, []
         self.info = StepInfo(tau=tau, e_c1=e_c1, e_c2=e_c2, e_a=e_a, e_d=e_d, probing=noise,

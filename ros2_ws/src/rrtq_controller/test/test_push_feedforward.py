@@ -163,21 +163,23 @@ def test_no_model_no_push():
     assert np.array_equal(canceller.force(np.zeros(2)), np.zeros(2))
 
 
-@pytest.mark.parametrize('feedforward', [True, False])
+@pytest.mark.parametrize('feedforward, law', [(True, 'optimal'), (True, 'cancel'),
+                                               (False, 'optimal')])
 def test_the_controller_reaches_its_target_through_a_steady_push_only_with_the_feed_forward(
-        feedforward):
+        feedforward, law):
     """The controller held at a PD gain (no learning: the actor never moves) on legs of 10 s
     toward the origin, in a steady 0.7 m/s² field per axis (a field bump the robot stands
     in, 28 N): without the feed-forward it ends F_d / K_p = 0.7 m per axis short, with it
     within a tenth of that (the observer's model is identified on the first legs)."""
-    from rrtq_controller.config import ControllerConfig
+    from rrtq_controller.config import ControllerConfig, PushLaw
     from rrtq_controller.q_learning import QLearningController
 
     A, B = ref.rover(MASS, 0.0, 45.0)
     G = np.array([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])   # per axis, m/s²
     plant = ref.Plant(A, B, DT, G)
     cfg = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=tuple(map(tuple, K)),
-                           actor_warmup_legs=10**6, push_feedforward=feedforward)
+                           actor_warmup_legs=10**6, push_feedforward=feedforward,
+                           push_feedforward_law=PushLaw(law))
     assert ControllerConfig().push_feedforward is False      # experimental: off by default
     ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(0))
     t, v = 0.0, np.zeros(2)
@@ -197,11 +199,12 @@ def test_the_controller_reaches_its_target_through_a_steady_push_only_with_the_f
     if feedforward:
         assert last < 0.1 * 0.7
         # a skipped tick (a free-running robot side): the step over the gap is not read
-        canceller = ctrl._canceller
-        assert canceller is not None
-        before = canceller.estimate.copy()
+        canceller, forward = ctrl._canceller, ctrl._forward
+        assert (canceller is None) == (law == 'optimal') and (forward is None) == (law == 'cancel')
+        before = (canceller.estimate if canceller is not None else forward.state).copy()
         ctrl.step(t + 3 * DT, x + np.array([0.0, 0.0, 1.0, 0.0]))
-        assert np.array_equal(canceller.estimate, before)
+        assert np.array_equal(canceller.estimate if canceller is not None else forward.state,
+                              before)
     else:
         assert last == pytest.approx(0.7, abs=0.1)
 

@@ -48,7 +48,8 @@ _CTRL_KEYS = (
     'variant', 'horizon', 'dt', 'M', 'R', 'P_T', 'alpha_c', 'alpha_a', 'alpha_d', 'gamma', 'rho',
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
     'probing_line_fraction', 'force_limit', 'measured_disturbance', 'observer',
-    'disturbance_estimate', 'rollout_test', 'push_feedforward', 'push_filter_time', 'model',
+    'disturbance_estimate', 'rollout_test', 'push_feedforward', 'push_feedforward_law',
+    'push_filter_time', 'model',
     'vf_lpc',
 )  # fmt: skip
 # planner key -> the settings dataclass it belongs to
@@ -289,6 +290,7 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
         goal=(float(world.goal[0]), float(world.goal[1])),
         critic_law=_choice(r, data, 'critic_law', ControllerConfig, key),
         actor_law=_choice(r, data, 'actor_law', ControllerConfig, key),
+        push_feedforward_law=_choice(r, data, 'push_feedforward_law', ControllerConfig, key),
         initial_gain=gain,
         **{name: r.boolean(data.get(name, field_default(ControllerConfig, name)),
                            f'controller.{name}')
