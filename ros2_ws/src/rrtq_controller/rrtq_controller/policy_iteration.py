@@ -131,7 +131,7 @@ class PolicyIteration(WeightReadout):
             if self._canceller is not None:     # what of the push can be predicted, and how
                 self._canceller.fit(self.observer.pushes(), model.delay + 1)
             if self._forward is not None:       # its internal model and LQ gain
-                self._forward.fit(model.phi, model.gamma, model.ar, self.observer.pushes(),
+                self._forward.fit(model.phi, model.gamma, self.observer.pushes(),
                                   self.observer.read_noise(), model.delay + 1)
         if isinstance(self.critic, LeastSquaresCritic):
             self.critic.evaluate(self._rows)

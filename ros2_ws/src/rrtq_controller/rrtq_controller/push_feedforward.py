@@ -1,16 +1,16 @@
 """The LQ-optimal feed-forward of a push the robot can predict (no rclpy, no ROS).
 
 The observer (:mod:`rrtq_controller.observer`) identifies the robot's one-step model
-x_{k+1} = Φ x_k + Γ u_k + e_k and the disturbance's AR(p) model; the matched push over each
-step, w_k = Γ⁺ e_k (N per input), is read from the odometry (:meth:`Observer.last_push`).
-Model it as the output of an internal model with state ω,
+x_{k+1} = Φ x_k + Γ u_k + e_k; the matched push over each step, w_k = Γ⁺ e_k (N per input),
+is read from the odometry (:meth:`Observer.last_push`). Model it as the output of an
+internal model with state ω,
 
-    ω_{k+1} = A_ω ω_k (+ innovations),    w_k = G ω_k,
+    ω_{k+1} = A_ω ω_k (+ innovations),    w_k = G ω_k (+ what is not predictable),
 
-ω = (c, w_k, w_{k-1}, ..., w_{k-p+1}) per input: a constant c (a slope, a payload, a field
-the robot stands in: A = 1) plus the AR(p) part (a sinusoid is AR(2) with a unit root, a
-white push has no predictable part). For the discrete LQ cost Σ (xᵀ M x + uᵀ R u) Δt with
-the policy's feedback u = -K x, the optimal control with ω known is
+ω = (c, h) per input: a constant c (a slope, a payload, a field the robot stands in: A = 1)
+plus, where the reads show one, a harmonic h of the frequency they show (a rotation by ω₀Δt
+per step; :func:`find_harmonic`). For the discrete LQ cost Σ (xᵀ M x + uᵀ R u) Δt with the
+policy's feedback u = -K x, the optimal control with ω known is
 
     u = -K x - K_ω ω,   K_ω = H⁻¹ Γᵀ (P Γ G + S A_ω),   H = R Δt + Γᵀ P Γ,
 
@@ -19,54 +19,120 @@ certainty equivalence, the disturbance's own dynamics taken into account. For a 
 on a plant without a spring it is the whole push (K_ω G = I on c: the robot holds its target,
 as integral action would), for a periodic one much less than the push: against a 0.1 Hz
 sinusoid on the 40 kg rover it halves the cost the feedback alone pays, where cancelling the
-whole push costs a quarter more than the feedback alone (``test_push_feedforward.py``).
+whole push costs a quarter more than the feedback alone (``test_lq_feedforward.py``).
 
-The ω the gain multiplies is estimated by a steady-state Kalman filter on the reads
-(:class:`PushFeedforward`): the innovations' covariance from the reads' own AR residuals
-(less what the odometry's noise puts into them), the reads' noise from the odometry's
-(:meth:`Observer.read_noise`), so that a white push (no predictable part) and odometry
-noise feed nothing forward, and predicted 1 + d steps on (d the identified delay: the force
-commanded now acts then).
+Why a harmonic and not the observer's AR model of the residual: under odometry noise a read
+carries ~50 N RMS of noise (σ_v = 0.05 m/s on 40 kg at Δt = 0.05 s) against a 20 N push, and
+an AR fit to noisy reads is biased toward white (errors in variables: a 0.1 Hz sinusoid read
+as AR (0.78, 0.17) instead of (2.0, -1.0)), so nothing of it was predicted; the periodogram
+of the same reads finds the frequency to its resolution with a false-alarm probability below
+10⁻⁸ (docs/observer.md §7).
+
+The ω the gain multiplies starts at each fit from the least-squares fit of the constant and
+the harmonic over the observer's memory and is then tracked by a steady-state Kalman filter
+on the reads (:class:`PushFeedforward`): the reads' noise is the odometry's
+(:meth:`Observer.read_noise`) plus the push's unpredictable part (the fit's residual less that
+noise), so that a white push and odometry noise feed nothing forward; it is predicted 1 + d
+steps on (d the identified delay: the force commanded now acts then).
 """
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import solve_discrete_are
+from scipy.stats import gamma as gamma_distribution
 from scipy.stats import norm
 
 Array = NDArray[np.float64]
 
-__all__ = ['internal_model', 'feedforward_gain', 'PushFeedforward']
+__all__ = ['find_harmonic', 'internal_model', 'feedforward_gain', 'PushFeedforward']
 
 CONSTANT_WALK = 1.0
-"""The constant's random walk per step, as a share of the AR innovations' variance. Smaller,
-the constant is told apart from a persistent AR part more slowly: on the rover held at its
-target against a steady 20 N push it was still 0.43 m short after 50 s at 1/20 (the reads'
-AR(2), fitted to a residual that is rounding noise, took the push for a slow oscillation),
-0.05 m at 1, 2 mm at 5; under a white push the constant is then an average of a few reads,
-soft-thresholded by z times its posterior standard deviation (0.3 N RMS fed forward against
-a 20 N RMS push at 1, 0.55 N at 5; ``test_lq_feedforward.py``)."""
+"""The constant's random walk per step, as a share of the variance of the push's
+unpredictable part. Smaller, a change of the push (a field entered) is followed more slowly;
+under a white push the constant is an average of a few reads, soft-thresholded by z times
+its posterior standard deviation (0.3 N RMS fed forward against a 20 N RMS push at 1;
+``test_lq_feedforward.py``)."""
+
+MIN_CYCLES = 4
+"""A harmonic is looked for from frequencies with this many cycles in each half of the reads
+on (a slower change is the constant's to follow)."""
 
 
-def internal_model(ar: Array, m: int) -> tuple[Array, Array]:
-    """(A_ω, G) of the push's internal model for AR coefficients ``ar`` and m inputs.
+def _periodogram(push: Array, steps: NDArray[np.int64]) -> tuple[Array, Array, int]:
+    """The periodogram of reads at integer step ids (gaps allowed: zero-filled after the mean).
 
-    ω = (c, w_k, ..., w_{k-p+1}), each block m wide; w_k + c is the push (G).
+    Returns the frequencies (cycles per step), the m inputs' normalized power summed and the
+    number of independent frequencies. Normalized as Scargle's, by each input's variance:
+    under white reads each input's power at a Fourier frequency is Exp(1), the sum
+    Gamma(m, 1).
     """
-    p = len(ar)
-    q = (p + 1) * m
+    span = int(steps[-1] - steps[0]) + 1
+    size = 1 << int(math.ceil(math.log2(4 * span)))        # zero-padded four times
+    grid = np.zeros((size, push.shape[1]))
+    centred = push - push.mean(axis=0)
+    grid[steps - steps[0]] = centred
+    var = centred.var(axis=0)
+    power = np.square(np.abs(np.fft.rfft(grid, axis=0)))
+    freqs = np.asarray(np.fft.rfftfreq(size), dtype=float)
+    used = var > 0.0
+    total = (power[:, used] / (len(push) * var[used])).sum(axis=1)
+    keep = freqs >= MIN_CYCLES / span
+    return freqs[keep], total[keep], max(int(0.5 * span) - MIN_CYCLES, 1)
+
+
+def find_harmonic(push: Array, steps: NDArray[np.int64], false_alarm: float) -> float | None:
+    """The frequency (rad per step) of a harmonic the reads carry throughout, or None.
+
+    The periodogram's peak (:func:`_periodogram`) must be significant at ``false_alarm`` in
+    each half of the reads (the probability that the largest of the independent frequencies'
+    powers of white reads exceeds it: 1 - (1 - Gamma_sf(P; m))^M), and the halves' peaks
+    must agree to two of their frequency bins: a push that persists, not a transient (a field
+    crossed once) whose power lies at low frequencies too.
+    """
+    if len(push) < 8 * MIN_CYCLES:
+        return None
+    peaks = []
+    half = len(push) // 2
+    for part in (slice(0, half), slice(half, len(push))):
+        freqs, power, independent = _periodogram(push[part], steps[part])
+        if len(freqs) == 0:
+            return None
+        k = int(np.argmax(power))
+        chance = -math.expm1(independent * math.log1p(
+            -min(float(gamma_distribution.sf(power[k], push.shape[1])), 1.0 - 1e-16)))
+        if chance >= false_alarm:
+            return None
+        peaks.append((float(freqs[k]), int(steps[part][-1] - steps[part][0]) + 1))
+    (f1, span1), (f2, span2) = peaks
+    if abs(f1 - f2) > 2.0 / min(span1, span2):
+        return None
+    freqs, power, _ = _periodogram(push, steps)               # the whole memory: the finest
+    return 2.0 * math.pi * float(freqs[int(np.argmax(power))])
+
+
+def internal_model(omega: float | None, m: int, decay: float = 1.0) -> tuple[Array, Array]:
+    """(A_ω, G) of the push's internal model for m inputs and a harmonic of ``omega``.
+
+    ``omega`` in rad per step; None: the constant alone. ω = (c, h) with c m wide and h two
+    per input (its rotation by ω per step; the push is c + the first of each pair).
+    ``decay`` (< 1) damps the whole model: the tests compare with a Riccati problem that
+    needs a stabilisable augmented plant.
+    """
+    q = m if omega is None else 3 * m
     A = np.zeros((q, q))
-    A[:m, :m] = np.eye(m)
-    for i, a in enumerate(ar):
-        A[m:2 * m, (1 + i) * m:(2 + i) * m] = a * np.eye(m)
-    for i in range(1, p):
-        A[(1 + i) * m:(2 + i) * m, i * m:(1 + i) * m] = np.eye(m)
+    A[:m, :m] = decay * np.eye(m)
     G = np.zeros((m, q))
     G[:, :m] = np.eye(m)
-    if p:
-        G[:, m:2 * m] = np.eye(m)
+    if omega is not None:
+        c, s = math.cos(omega), math.sin(omega)
+        for j in range(m):
+            i = m + 2 * j
+            A[i:i + 2, i:i + 2] = decay * np.array([[c, -s], [s, c]])
+            G[j, i] = 1.0
     return A, G
 
 
@@ -119,15 +185,18 @@ def _kalman_gain(A: Array, G: Array, Q: Array, R_v: Array,
 class PushFeedforward:
     """The force -K_ω ω̂ that meets the push the robot can predict (module doc).
 
-    :meth:`fit` at each identification (the model, its AR coefficients, the reads over the
-    observer's memory); :meth:`update` with each step's read; :meth:`force` the
+    :meth:`fit` at each identification (the model, the reads over the observer's
+    memory); :meth:`update` with each step's read; :meth:`force` the
     feed-forward for the force commanded now. Before a fit, or without a model to read
     pushes through (``update(None)``), it feeds nothing forward and forgets its estimate.
     """
 
     def __init__(self, m: int, dt: float, M: Array, R: Array, false_alarm: float) -> None:
         self.m, self.dt = m, dt
+        self.false_alarm = false_alarm
         self._z = float(norm.ppf(1.0 - false_alarm / 2.0))
+        self.omega: float | None = None
+        """rad per step: the harmonic of the internal model; None: the constant alone."""
         self.constant_std = np.zeros(m)
         """N per input: the posterior standard deviation of the constant c."""
         self.M, self.R = np.asarray(M, dtype=float), np.asarray(R, dtype=float)
@@ -140,9 +209,9 @@ class PushFeedforward:
         self.state = np.zeros(0)
         """ω̂ after the last read."""
 
-    def fit(self, phi: Array, gamma: Array, ar: Array,
-            reads: tuple[Array, NDArray[np.int64]] | None, read_noise: Array, lead: int) -> None:
-        """The internal model, its Kalman gain and K_ω from the observer's current model.
+    def fit(self, phi: Array, gamma: Array, reads: tuple[Array, NDArray[np.int64]] | None,
+            read_noise: Array, lead: int) -> None:
+        """The internal model, its Kalman gain, K_ω and ω̂ from the observer's current model.
 
         ``reads``: the pushes read over the memory (:meth:`Observer.pushes`), N per input,
         with their step ids; ``read_noise``: the covariance (m x m) odometry noise puts into
@@ -152,33 +221,41 @@ class PushFeedforward:
         """
         m = self.m
         self.A, self.gain = None, np.zeros((m, 0))
-        if reads is None or len(reads[0]) < 20 * (len(ar) + 2):
+        if reads is None or len(reads[0]) < 16 * MIN_CYCLES:
             return
-        push, steps = reads
-        A, G = internal_model(np.asarray(ar, dtype=float), m)
+        push, steps = np.asarray(reads[0], dtype=float), np.asarray(reads[1])
+        omega = find_harmonic(push, steps, self.false_alarm)
+        A, G = internal_model(omega, m)
         q = A.shape[0]
-        # the AR part's innovations from consecutive reads, less the noise the reads carry
-        p = len(ar)
-        w = push - push.mean(axis=0)
-        ok = np.ones(len(w), dtype=bool)
-        ok[:p] = False
-        for i in range(1, p + 1):
-            ok[i:] &= steps[i:] == steps[:-i] + i
-        innovation = w.copy()
-        for i, a in enumerate(ar, start=1):
-            innovation[i:] -= a * w[:-i]
-        if ok.sum() < 10:
-            return
-        noise = np.asarray(read_noise, dtype=float) * (1.0 + float(np.sum(np.square(ar))))
-        Q_e = np.atleast_2d(np.cov(innovation[ok].T)) - noise
-        vals, vecs = np.linalg.eigh(0.5 * (Q_e + Q_e.T))
-        scale = max(float(np.trace(np.atleast_2d(np.cov(innovation[ok].T)))) / m, 1e-12)
-        Q_e = (vecs * np.maximum(vals, 1e-6 * scale)) @ vecs.T
+        # the constant and the harmonic by least squares over the memory; what is left, less
+        # the odometry's noise, is the push's unpredictable part
+        k = steps.astype(float)
+        columns = [np.ones_like(k)]
+        if omega is not None:
+            columns += [np.cos(omega * k), np.sin(omega * k)]
+        basis = np.column_stack(columns)
+        coef = np.linalg.lstsq(basis, push, rcond=None)[0]
+        left = push - basis @ coef
+        noise = np.asarray(read_noise, dtype=float)
+        scale = max(float(np.trace(np.atleast_2d(np.cov(push.T)))) / m, 1e-12)
+        unpredictable = np.atleast_2d(np.cov(left.T)) - noise
+        vals, vecs = np.linalg.eigh(0.5 * (unpredictable + unpredictable.T))
+        unpredictable = (vecs * np.maximum(vals, 1e-6 * scale)) @ vecs.T
         Q = np.zeros((q, q))
-        Q[:m, :m] = CONSTANT_WALK * Q_e
-        if p:
-            Q[m:2 * m, m:2 * m] = Q_e
-        R_v = np.asarray(read_noise, dtype=float) + 1e-6 * scale * np.eye(m)
+        Q[:m, :m] = CONSTANT_WALK * unpredictable
+        state = np.zeros(q)
+        state[:m] = coef[0]
+        if omega is not None:
+            # the harmonic wanders by its amplitude times the frequency's resolution per step
+            resolution = 2.0 * math.pi / (steps[-1] - steps[0] + 1)
+            last = omega * float(steps[-1])
+            for j in range(m):
+                a, b = coef[1, j], coef[2, j]
+                i = m + 2 * j
+                Q[i:i + 2, i:i + 2] = ((a * a + b * b) * resolution ** 2 + 1e-6 * scale) * np.eye(2)
+                state[i:i + 2] = (a * math.cos(last) + b * math.sin(last),
+                                  a * math.sin(last) - b * math.cos(last))
+        R_v = noise + unpredictable + 1e-6 * scale * np.eye(m)
         try:
             kalman, posterior = _kalman_gain(A, G, Q, R_v)
             gain = feedforward_gain(phi, gamma, self.M, self.R, self.dt, A, G)
@@ -186,11 +263,10 @@ class PushFeedforward:
             return
         if not (np.all(np.isfinite(kalman)) and np.all(np.isfinite(gain))):
             return
-        self.kalman = kalman
+        self.kalman, self.omega = kalman, omega
         self.constant_std = np.sqrt(np.maximum(np.diag(posterior)[:m], 0.0))
         self.A, self.G, self.gain, self.lead = A, G, gain, max(int(lead), 1)
-        if self.state.shape != (q,):
-            self.state = np.zeros(q)
+        self.state = state
 
     def update(self, push: Array | None) -> None:
         """Take one step's read (N per input); None (no model to read it through): forget."""
