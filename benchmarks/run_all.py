@@ -109,8 +109,12 @@ BENCHMARKS = [
     Benchmark('robot_side', 'Controller', 'The robot side blind to its disturbance',
               'Twelve rows of disturbances, plants, odometry noise and actuation delay, the '
               'robot reading only its odometry, commands and perception. Six of the rows with '
-              'the experimental push feed-forward on (`controller.push_feedforward`, '
-              'docs/observer.md §6): results/robot_side_push_feedforward.md.'),
+              'the experimental push feed-forward on, its cancelling law (docs/observer.md §6): '
+              'results/robot_side_push_feedforward.md.'),
+    Benchmark('push_feedforward', 'Controller', 'The robot side with the LQ push feed-forward',
+              'The rows of the robot-side benchmark with the opt-in LQ-optimal push '
+              'feed-forward on (`controller.push_feedforward: true`, docs/observer.md §7), to '
+              'set against the same rows without it.'),
     Benchmark('physical_plant', 'Bring your own robot', 'MuJoCo plant and laser scan',
               'The MuJoCo plant at three Coulomb frictions, and scan against polygon '
               'perception.'),
