@@ -40,8 +40,9 @@ class PushLaw(enum.StrEnum):
 
     OPTIMAL = 'optimal'
     """The LQ-optimal feed-forward of the push the identified model predicts: its internal
-    model (a constant and the AR part) estimated from the reads by a Kalman filter, times the
-    gain of the certainty-equivalent LQ problem (:mod:`rrtq_controller.push_feedforward`)."""
+    model (a constant and the harmonic the reads' periodogram shows) fitted over the memory
+    and tracked by a Kalman filter, times the gain of the certainty-equivalent LQ problem
+    (:mod:`rrtq_controller.push_feedforward`)."""
 
     CANCEL = 'cancel'
     """Minus the predicted push (α + β times the low-pass filtered reads,

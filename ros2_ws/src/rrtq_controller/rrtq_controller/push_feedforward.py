@@ -218,8 +218,6 @@ class PushFeedforward:
         self.m, self.dt = m, dt
         self.false_alarm = false_alarm
         self._z = float(norm.ppf(1.0 - false_alarm / 2.0))
-        self.omega: float | None = None
-        """rad per step: the harmonic of the internal model; None: the constant alone."""
         self.constant_std = np.zeros(m)
         """N per input: the posterior standard deviation of the constant c."""
         self.M, self.R = np.asarray(M, dtype=float), np.asarray(R, dtype=float)
@@ -228,7 +226,8 @@ class PushFeedforward:
         self.gain = np.zeros((m, 0))
         """K_ω (m x q), N per unit of ω."""
         self.kalman = np.zeros((0, m))
-        self.lead = 1
+        self.ahead = np.zeros((0, 0))
+        """A_ω to the power ``lead`` (:meth:`fit`): ω̂ carried to the step the force acts."""
         self.state = np.zeros(0)
         """ω̂ after the last read."""
 
@@ -286,9 +285,10 @@ class PushFeedforward:
             return
         if not (np.all(np.isfinite(kalman)) and np.all(np.isfinite(gain))):
             return
-        self.kalman, self.omega = kalman, omega
+        self.kalman = kalman
         self.constant_std = np.sqrt(np.maximum(np.diag(posterior)[:m], 0.0))
-        self.A, self.G, self.gain, self.lead = A, G, gain, max(int(lead), 1)
+        self.A, self.G, self.gain = A, G, gain
+        self.ahead = np.linalg.matrix_power(A, max(int(lead), 1))
         self.state = state
 
     def update(self, push: Array | None) -> None:
@@ -304,10 +304,9 @@ class PushFeedforward:
 
         The constant is first shrunk toward zero by z times its posterior standard deviation.
         """
-        if self.A is None or self.state.shape != (self.A.shape[0],):
+        if self.A is None:          # fit sets A and a state of its size together
             return np.zeros(self.m)
         state = self.state.copy()
         c = state[:self.m]
         state[:self.m] = np.sign(c) * np.maximum(np.abs(c) - self._z * self.constant_std, 0.0)
-        ahead = np.linalg.matrix_power(self.A, self.lead) @ state
-        return np.asarray(-self.gain @ ahead, dtype=float)
+        return np.asarray(-self.gain @ (self.ahead @ state), dtype=float)

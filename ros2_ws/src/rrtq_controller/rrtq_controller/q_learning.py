@@ -287,14 +287,12 @@ class QLearningController(PolicyIteration):
         x = np.array(x_bar, dtype=float)  # a copy: it is kept for the next step
         tau = self.time_to_go(t)
         e_c1 = e_c2 = 0.0
-        if (self._prev is not None and self._canceller is not None and self.observer is not None
+        feed = self._canceller if self._canceller is not None else self._forward
+        if (self._prev is not None and feed is not None and self.observer is not None
                 and abs(t - self._prev_t - self.config.dt) < 0.5 * self.config.dt):
             # the step that just ended, if it was one Δt (a free-running robot side can skip
             # ticks, and over a gap the model's one step does not hold)
-            self._canceller.update(self.observer.last_push(x))
-        if (self._prev is not None and self._forward is not None and self.observer is not None
-                and abs(t - self._prev_t - self.config.dt) < 0.5 * self.config.dt):
-            self._forward.update(self.observer.last_push(x))
+            feed.update(self.observer.last_push(x))
         if self._prev is not None:
             measured = d_applied is not None and self.q > 0 and self.config.reads_disturbance
             d_prev = np.asarray(d_applied, dtype=float) if measured else self._d_out
