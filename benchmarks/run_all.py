@@ -115,6 +115,10 @@ BENCHMARKS = [
               'The rows of the robot-side benchmark with the opt-in LQ-optimal push '
               'feed-forward on (`controller.push_feedforward: true`, docs/observer.md §7), to '
               'set against the same rows without it.'),
+    Benchmark('riccati_gain', 'Controller', 'Learned against the optimal feedback',
+              'A robot-side row flown twice on the same layouts: learned from the defaults, '
+              'and with the actor held at the Riccati gain of the true plant. Where the gain '
+              'meets the row and learning does not, the learner fails the row.'),
     Benchmark('physical_plant', 'Bring your own robot', 'MuJoCo plant and laser scan',
               'The MuJoCo plant at three Coulomb frictions, and scan against polygon '
               'perception.'),
