@@ -31,7 +31,7 @@ from robot_side import render as robot_side_table
 
 PLANT = {'mass': 40.0, 'damping': 45.0, 'stiffness': 20.0}   # rrtq_sim.plant's defaults
 M_DEFAULT, R_DEFAULT = 10.0, 0.02                            # the controller's defaults
-CHOSEN = ('110 kg, sine 0.1 Hz',)
+CHOSEN = ('110 kg, sine 0.1 Hz', 'rover, field bump')
 
 
 def riccati_gain(settings: list[str]) -> np.ndarray:
