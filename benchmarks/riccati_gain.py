@@ -16,6 +16,7 @@ Usage: ``.venv/bin/python benchmarks/riccati_gain.py [--seeds 20] [--rows NAME .
 
 from __future__ import annotations
 
+import dataclasses
 import pathlib
 import sys
 
@@ -27,10 +28,13 @@ from scipy.linalg import solve_continuous_are
 from common import failures_and_commands, rows_benchmark
 from robot_side import BASE, DURATION
 from robot_side import ROWS as ROBOT_SIDE
-from robot_side import render as robot_side_table
+from robot_side import table as robot_side_table
+from rrtq_controller.config import ControllerConfig
+from rrtq_sim.plant import PlantConfig
 
-PLANT = {'mass': 40.0, 'damping': 45.0, 'stiffness': 20.0}   # rrtq_sim.plant's defaults
-M_DEFAULT, R_DEFAULT = 10.0, 0.02                            # the controller's defaults
+PLANT = {f.name: float(f.default) for f in dataclasses.fields(PlantConfig)
+         if f.name in ('mass', 'damping', 'stiffness')}   # the simulator's defaults
+M_DEFAULT, R_DEFAULT = float(ControllerConfig().M), float(ControllerConfig().R)
 CHOSEN = ('110 kg, sine 0.1 Hz', 'rover, field bump')
 
 
@@ -78,16 +82,13 @@ def largest_margin(run_dir: str) -> float:
 
 def render(rows: list[dict]) -> str:
     """robot_side's table, the margins each row's runs grew to, the failures and commands."""
-    table = robot_side_table(rows)
-    head = table.split('\n\nMissions that failed')[0].split('\n\nCommands')[0]
-    head = head[head.index('| row |'):]     # robot_side's preamble speaks of its own rows
     lines = ['Each row twice on the same layouts (`rrtq bench scenarios/defaults_only.yaml`, 8 '
              'random obstacles, `--set duration=400`), blind to the disturbance: learned from '
              "the defaults, and with the actor held at the Riccati gain of the true plant "
              '(scipy, the default M and R; no probing); the safety shell (watch, brake, '
              'keep-off, running-max margin) is the same in both. Last ten: each run\'s median '
              'over its last ten legs of the leg cost over the true Riccati policy flown through '
-             'the same recorded disturbance.', '', head, '',
+             'the same recorded disturbance.', '', *robot_side_table(rows), '',
              '| row | largest margin m: median (max) over the runs | goals cut off |',
              '|---|---|---|']
     for r in rows:

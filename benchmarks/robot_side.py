@@ -57,15 +57,9 @@ ROWS: dict[str, tuple[str, list[str]]] = {
 DURATION = 'duration=400'
 
 
-def render(rows: list[dict]) -> str:
-    """The table of the rows, and the missions that failed."""
-    lines = ['Every row from the controller\'s defaults, blind to the disturbance '
-             '(`measured_disturbance: false`), on the random layouts of `rrtq bench '
-             'scenarios/defaults_only.yaml` (8 obstacles, seeds as stated), `--set duration=400`. '
-             'Last ten: each run\'s median over its last ten legs of the leg cost over the true '
-             'Riccati policy flown through the same recorded disturbance, odometry noise and '
-             'delay; the table gives the median over the runs and the runs within 5 % / 10 %.', '',
-             '| row | goals (95 % CI) | collisions | out of bounds | largest command / limit '
+def table(rows: list[dict]) -> list[str]:
+    """The markdown table of the rows: goals, collisions, exits, commands, last ten, time."""
+    lines = ['| row | goals (95 % CI) | collisions | out of bounds | largest command / limit '
              '| last ten / Riccati policy: median (p90) | within 5 % / 10 % | time to goal s '
              '(median) |', '|---|---|---|---|---|---|---|---|']
     for r in rows:
@@ -80,8 +74,18 @@ def render(rows: list[dict]) -> str:
             f"({c.get('ratio_riccati_policy_p90', float('nan')):.3f}) | "
             f"{c.get('within_5pct', 0)} / {c.get('within_10pct', 0)} of {c.get('runs', 0)} | "
             f"{'—' if ttg is None else f'{ttg:.1f}'} |")
-    lines += failures_and_commands(rows)
-    return '\n'.join(lines)
+    return lines
+
+
+def render(rows: list[dict]) -> str:
+    """The table of the rows, and the missions that failed."""
+    lines = ['Every row from the controller\'s defaults, blind to the disturbance '
+             '(`measured_disturbance: false`), on the random layouts of `rrtq bench '
+             'scenarios/defaults_only.yaml` (8 obstacles, seeds as stated), `--set duration=400`. '
+             'Last ten: each run\'s median over its last ten legs of the leg cost over the true '
+             'Riccati policy flown through the same recorded disturbance, odometry noise and '
+             'delay; the table gives the median over the runs and the runs within 5 % / 10 %.', '']
+    return '\n'.join(lines + table(rows) + failures_and_commands(rows))
 
 
 def main() -> int:
