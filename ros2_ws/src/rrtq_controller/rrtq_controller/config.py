@@ -207,6 +207,12 @@ class ControllerConfig:
     not measure its disturbance can play against the equivalent input disturbance its
     observer identifies (:meth:`rrtq_controller.observer.Observer.acted`): m components, in
     the units of the forces, entering where the forces do (a matched disturbance)."""
+    integral_action: bool = setting(True, doc='on a leg that follows one which ran its '
+                                    'horizon short of the same waypoint, add a force toward '
+                                    'it that grows by force_limit / T per second while the '
+                                    'robot is too slow to enter its window in the time left')
+    """Conditional integral action (:mod:`rrtq_controller.held_short`): a steady push or
+    Coulomb friction holds any linear state feedback short of its waypoint; false: none."""
     push_feedforward: bool = setting(False, doc='nominal variant with the observer: add to '
                                      'the policy\'s force the force that cancels the push '
                                      'the observer predicts from the low-pass filtered push '

@@ -24,6 +24,8 @@ the weights (gains, kernels) :mod:`readout`'s.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -32,6 +34,7 @@ from .config import ActorLaw, ControllerConfig, PushLaw, StepInfo, Variant
 from .critic import LeastSquaresCritic, make_critic
 from .guard import FALSE_ALARM, Brake, DivergenceWatch, KeepOff, PolicyEvent, Sensing, face_ahead
 from .observer import Observer, PushCanceller
+from .held_short import HeldShort
 from .push_feedforward import PushFeedforward
 from .policy_iteration import PolicyIteration
 from .probing import Probing
@@ -113,6 +116,10 @@ class QLearningController(PolicyIteration):
         self._keep_ahead = KeepOff(c.keep_off, c.force_limit, c.dt, lead=c.hold_stop_time,
                                    sensing=self.sensing)
         """The keep-off of the obstacle ahead along the velocity (:func:`guard.face_ahead`)."""
+        self._held_short = HeldShort(m, c.rho, c.horizon, c.dt,
+                                     c.force_limit if c.integral_action else math.inf,
+                                     sensing=self.sensing)
+        """Integral action on a leg retried toward the waypoint the last one ran out on."""
         self._braking = False
         """Whether the robot is being braked (a HOLD with ``safe_hold: brake``, or a leg that
         left its line): until the robot is at rest, at most T, and then only on a policy
@@ -178,8 +185,10 @@ class QLearningController(PolicyIteration):
         watch measures from the reference leg's target, :class:`guard.DivergenceWatch`).
         """
         renew = True   # a fresh divergence reference: first leg, completed leg, a revert
+        retry = False  # the last leg ran its horizon toward this leg's waypoint
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
+            retry = ran_out and moved is not None and not np.any(np.asarray(moved) != 0.0)
             entered = not ran_out if completed is None else completed
             if entered:
                 self.completed_leg()
@@ -205,6 +214,11 @@ class QLearningController(PolicyIteration):
                           None if moved is None else np.asarray(moved, dtype=float))
         self._held = False   # a brake goes on (:meth:`step`)
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
+        self._held_short.start_leg(np.asarray(x0_bar, dtype=float), retry and not self._braking)
+        if self._held_short.active:
+            self._events.append((PolicyEvent.HELD_SHORT,
+                                 'the last leg ran its horizon short of this waypoint: integral '
+                                 'action'))
 
     def renew_horizon(self, x0_bar: Array, t: float) -> None:
         """Keep station on a reached target with a fresh horizon from time t (s).
@@ -300,6 +314,7 @@ class QLearningController(PolicyIteration):
         reason = self._watch.check(x)
         if reason:
             self.revert(reason, t, brake=self._watch.off_line)
+            self._held_short.drop()
         phi = self.time_basis(tau)  # after the update, which may widen the basis
         e_a = e_d = np.zeros(0)
         if self.leg_index >= self.config.actor_warmup_legs:
@@ -319,9 +334,11 @@ class QLearningController(PolicyIteration):
             feedforward = self._forward.force()
         if self._braking:
             noise = np.zeros(self.m)
+            self._held_short.drop()
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
-            u = np.clip(self._policy_u(phi, x) + noise + feedforward, -limit, limit)
+            u = np.clip(self._policy_u(phi, x) + noise + feedforward + self._held_short(x),
+                        -limit, limit)
         velocity = x[2:2 + self.m]
         obstacles = (nearest, None if ahead is None else face_ahead(*ahead, velocity))
         for keep, obstacle in zip((self._keep_off, self._keep_ahead), obstacles, strict=True):

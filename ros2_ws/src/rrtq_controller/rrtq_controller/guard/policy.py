@@ -39,6 +39,9 @@ class PolicyEvent(enum.Enum):
     """A leg diverged: the actors are back at the last policy that completed a leg."""
     HOLD = 'hold'
     """A leg diverged before any policy completed a leg: the safe hold (:class:`.forces.Brake`)."""
+    HELD_SHORT = 'held_short'
+    """A leg ran its horizon short of its waypoint: the retry adds integral action
+    (:class:`rrtq_controller.held_short.HeldShort`)."""
 
 
 def trust_step(change: Array, current: Array, floor: float, growth: float) -> float:

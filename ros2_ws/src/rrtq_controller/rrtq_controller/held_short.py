@@ -1,0 +1,151 @@
+"""Integral action for a leg held short of its target (no rclpy, no model of the plant).
+
+A state feedback u = -K x̄ holds a robot under a steady push F_d (a field it stands in, a
+slope) at the offset where K_p x̄ balances the push, F_d / K_p from its target (28 N against
+the Riccati gain's 22.4 N/m: 1.25 m on the rover), and a robot with Coulomb friction stops
+wherever K x̄ no longer exceeds the friction (a zero initial gain never starts: its 20 N of
+probing does not break 39 N of friction). Either way the leg runs its whole horizon, a new
+leg toward the same waypoint starts from where the robot stands (RRT-QX Alg. 1: the
+finite-horizon problem is posed anew), its window ρ D0 shrinks with D0, and the mission
+never goes on. No learning fixes it: every linear state feedback, the optimal one too,
+stops short (``benchmarks/results/riccati_gain.md``, the field bump: 14/20 goals).
+
+:class:`HeldShort` is conditional integration, the classic anti-windup form of integral
+action. It is armed by a leg that follows one which ran its horizon toward the *same*
+waypoint (the event that says "held short"; nothing else arms it), and it integrates only
+while the robot is too slow to cover its distance to the window in a horizon and is not
+speeding up fast enough to become so,
+
+    a + max(a - a' - σ, 0) T / (l Δt) < (|p̄| - ρ D0) / T
+
+(|p̄| the robot's distance from its target, ê the unit vector from the robot to it,
+a = v · ê the speed toward it and a' that speed l steps earlier, l the lag a force takes to
+show, σ what noise alone can add to a speed: :class:`rrtq_controller.guard.Sensing`),
+adding ``rate`` Δt ê to its force each such step. So it grows until the robot moves toward
+its target, whatever holds it (a push, friction), and holds what it has while the robot
+makes enough progress or its feedback is still speeding it up (a retried leg starts at
+rest; a feedback that moves the robot needs a time constant to show it, and integrating
+through that would carry a bias into the rest of the leg). It does not wind up while the
+robot moves. The rate takes the actuator's limit in one horizon (``limit`` / T): any hold
+the actuator can overcome is overcome within one retried leg.
+
+Two rules keep it from doing harm where the hold is gone or changes with the direction:
+
+* past its target the force keeps no part pointing away from it (friction holds a robot
+  that overshot as it held it short; a force still pushing on would have to unwind
+  through twice the friction first: at μ = 0.3 the robot hunted ±1 m around its goal at
+  ±150 N);
+* toward another waypoint (the leg's window entered, or a new plan) only the part of the
+  force that points at the new waypoint is carried, and integral action stays armed while
+  that part is not zero (friction holds the robot at every waypoint: at μ = 0.1 a mission
+  that waited a horizon at each was 300 s and not at its goal, 106 s with the carry).
+
+The safety brake and a revert drop the force and disarm it.
+
+Beyond the papers, like the guard. The Bellman rows take the force applied, this part
+included, so the critic stays consistent (as with the keep-off and the saturation).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from numpy.typing import NDArray
+
+from .guard import Sensing
+
+Array = NDArray[np.float64]
+
+__all__ = ['HeldShort']
+
+
+@dataclass
+class HeldShort:
+    """The integral force of a leg retried toward the same waypoint (see the module).
+
+    ``m`` inputs (the first ``m`` states are the position, the next ``m`` the velocity, as
+    the rover's x̄ = (p - p_r, v)); ``rho`` the leg window's ρ; ``horizon`` T (s); ``dt`` Δt (s);
+    ``limit`` the actuator's limit per axis (N; not finite: no integral action).
+    """
+
+    m: int
+    rho: float
+    horizon: float
+    dt: float
+    limit: float
+    force: Array = field(init=False)
+    """N (m,): what is added to the policy's force."""
+    active: bool = False
+    """Whether this leg is a retry toward the waypoint the last leg ran out on."""
+    window: float = 0.0
+    """m: ρ D0 of this leg."""
+    sensing: Sensing = field(default_factory=Sensing)
+    """Odometry noise and actuation delay (the keep-offs' :class:`Sensing`)."""
+    _recent: deque[float] = field(default_factory=deque)
+
+    def __post_init__(self) -> None:
+        self.force = np.zeros(self.m)
+
+    @property
+    def rate(self) -> float:
+        """N/s: the growth of the force while the robot is held (the limit in one horizon)."""
+        return self.limit / self.horizon if math.isfinite(self.limit) else 0.0
+
+    def start_leg(self, x0_bar: Array, retry: bool) -> None:
+        """A new leg from x̄0; ``retry``: the last leg ran its horizon toward this waypoint."""
+        x0_bar = np.asarray(x0_bar, dtype=float)
+        self.window = self.rho * float(np.linalg.norm(x0_bar))
+        self._recent.clear()
+        if self.rate <= 0.0:
+            return
+        if retry:
+            self.active = True
+            return
+        # toward another waypoint: what still pushes toward it is carried, the rest dropped
+        offset = x0_bar[:self.m]
+        distance = float(np.linalg.norm(offset))
+        along = float(self.force @ (-offset / distance)) if distance > 0.0 else 0.0
+        if self.active and along > 0.0:
+            self.force = along * (-offset / distance)
+        else:
+            self.force = np.zeros(self.m)
+            self.active = False
+
+    def drop(self) -> None:
+        """The brake acts (or the leg's policy was reverted): no integral force, until a retry."""
+        self.force = np.zeros(self.m)
+        self.active = False
+        self._recent.clear()
+
+    def __call__(self, x_bar: Array) -> Array:
+        """N (m,): the integral force for this step at state x̄."""
+        if not self.active:
+            return self.force
+        x = np.asarray(x_bar, dtype=float)
+        offset = x[:self.m]
+        distance = float(np.linalg.norm(offset))
+        if distance <= 0.0:
+            return self.force
+        toward = -offset / distance
+        away = float(self.force @ toward)
+        if away < 0.0:                 # past the target: no force away from it (no hunting)
+            self.force = self.force - away * toward
+        speed = float(x[self.m:2 * self.m] @ toward) if x.size >= 2 * self.m else 0.0
+        needed = (distance - self.window) / self.horizon
+        self._recent.append(speed)
+        lag = self.sensing.lag
+        while len(self._recent) > lag + 1:
+            self._recent.popleft()
+        if len(self._recent) <= lag:
+            return self.force          # what the last force did has not shown yet
+        # m/s: what the speed gains in a horizon at its present rate
+        gain = max(speed - self._recent[0] - self.sensing.difference, 0.0) * self.horizon / (
+            lag * self.dt)
+        if speed + gain < needed:
+            grown = self.force + self.rate * self.dt * toward
+            size = float(np.linalg.norm(grown))
+            self.force = grown if size <= self.limit else grown * (self.limit / size)
+        return self.force

@@ -1,0 +1,220 @@
+"""Integral action on a leg held short of its waypoint (rrtq_controller.held_short).
+
+Ground truth that does not come from the code under test: the steady offset of a state
+feedback under a steady push, F_d / K_p, with K the rover's Riccati gain from scipy; a
+Coulomb-friction rover integrated here in 1 ms substeps.
+"""
+
+import math
+
+import numpy as np
+from scipy.linalg import solve_continuous_are
+
+from rrtq_controller.config import ControllerConfig
+from rrtq_controller.driver import LearningDriver
+from rrtq_controller.guard import Sensing
+from rrtq_controller.held_short import HeldShort
+from rrtq_testing import controller_reference as ref
+
+DT, T, RHO = 0.05, 10.0, 0.15
+MASS, DAMPING, LIMIT = 40.0, 45.0, 1000.0
+
+
+def _riccati_gain() -> np.ndarray:
+    A, B = ref.rover(mass=MASS, stiffness=0.0, damping=DAMPING)
+    P = solve_continuous_are(A, B, 10.0 * np.eye(4), 0.02 * np.eye(2))
+    return np.linalg.solve(0.02 * np.eye(2), B.T @ P)
+
+
+def _coulomb_step(x: np.ndarray, u: np.ndarray, friction: float) -> np.ndarray:
+    """One Δt of the rover with Coulomb friction per axis (stick below it), 1 ms substeps."""
+    x = x.copy()
+    h = 0.001
+    for _ in range(int(round(DT / h))):
+        for i in range(2):
+            v = x[2 + i]
+            if v == 0.0 and abs(u[i]) <= friction:
+                continue                                  # stuck
+            drive = u[i] - DAMPING * v - friction * (np.sign(v) if v != 0.0 else np.sign(u[i]))
+            v_new = v + h * drive / MASS
+            x[2 + i] = 0.0 if v != 0.0 and np.sign(v_new) != np.sign(v) else v_new
+            x[i] += h * x[2 + i]
+    return x
+
+
+def _fly(step, policy, x0, integral: bool, horizons: int = 6):
+    """Legs toward the origin as RRT-QX poses them: after a horizon short of the window, a
+    new leg toward the same waypoint from where the robot stands. Returns (entered at s or
+    None, final state, largest integral force, largest |u|)."""
+    held = HeldShort(2, RHO, T, DT, LIMIT if integral else math.inf)
+    x, t0 = np.asarray(x0, dtype=float), 0.0
+    held.start_leg(x, retry=False)
+    d0, biggest, umax = float(np.linalg.norm(x)), 0.0, 0.0
+    for k in range(int(horizons * T / DT)):
+        t = k * DT
+        if t - t0 >= T - 0.5 * DT:
+            t0, d0 = t, float(np.linalg.norm(x))
+            held.start_leg(x, retry=True)
+        if float(np.linalg.norm(x)) <= RHO * d0:
+            return t, x, biggest, umax
+        extra = held(x)
+        u = np.clip(policy(x) + extra, -LIMIT, LIMIT)
+        biggest = max(biggest, float(np.linalg.norm(extra)))
+        umax = max(umax, float(np.abs(u).max()))
+        x = step(x, u)
+    return None, x, biggest, umax
+
+
+def test_under_a_steady_push_the_optimal_feedback_stops_short_and_integral_action_enters():
+    """The field bump's failure: the Riccati gain holds the rover F_d / K_p from its
+    waypoint for ever; the retried leg's integral action takes it into its window, with a
+    force of about the push, never the actuator's limit."""
+    K = _riccati_gain()
+    push = np.array([-28.0, 0.0])                         # N, away from a target at the origin
+    plant = ref.Plant(*ref.rover(mass=MASS, stiffness=0.0, damping=DAMPING), DT)
+
+    def step(x, u):
+        return plant.step(x, u + push)
+
+    x0 = [-5.0, 0.0, 0.0, 0.0]
+    entered, x_end, _, _ = _fly(step, lambda x: -K @ x, x0, integral=False)
+    assert entered is None
+    offset = np.linalg.solve(K[:, :2], push)              # where K_p x̄ balances the push
+    assert np.allclose(x_end[:2], offset, atol=0.02 * np.linalg.norm(offset))
+    assert np.linalg.norm(offset) > RHO * np.linalg.norm(x0)          # never in its window
+
+    entered, x_end, biggest, umax = _fly(step, lambda x: -K @ x, x0, integral=True)
+    assert entered is not None and entered < 3 * T        # within the first two retries
+    assert 0.5 * np.linalg.norm(push) < biggest < 2.0 * np.linalg.norm(push)
+    assert umax <= LIMIT
+
+
+def test_a_zero_gain_held_by_coulomb_friction_breaks_free_without_winding_up():
+    """The MuJoCo plant at μ = 0.1 (39 N per axis on 40 kg): a zero gain (and probing below
+    the friction) never moves the robot; the retried leg's force grows until it does and
+    stops growing then: at most the friction plus what carries the robot at the speed the
+    leg needs against its damping, plus the ramp over one time constant m / c."""
+    friction = 0.1 * MASS * 9.81
+
+    def step(x, u):
+        return _coulomb_step(x, u, friction)
+
+    x0 = [-5.0, 0.0, 0.0, 0.0]
+    entered, x_end, _, _ = _fly(step, lambda x: np.zeros(2), x0, integral=False, horizons=3)
+    assert entered is None and np.allclose(x_end, x0)
+    entered, _, biggest, umax = _fly(step, lambda x: np.zeros(2), x0, integral=True, horizons=3)
+    assert entered is not None and entered < 3 * T       # in the second retry at the latest
+    rate = LIMIT / T
+    needed = (np.linalg.norm(x0) * (1 - RHO)) / T
+    assert friction < biggest <= friction + DAMPING * needed + rate * MASS / DAMPING
+    assert umax <= LIMIT
+
+
+def test_a_leg_that_is_no_retry_gets_no_force_and_a_new_waypoint_drops_it():
+    held = HeldShort(2, RHO, T, DT, LIMIT)
+    held.start_leg(np.array([-5.0, 0.0, 0.0, 0.0]), retry=False)
+    for _ in range(100):                                  # at rest, far from its target
+        assert not held(np.array([-5.0, 0.0, 0.0, 0.0])).any()
+    held.start_leg(np.array([-5.0, 0.0, 0.0, 0.0]), retry=True)
+    for _ in range(10):
+        force = held(np.array([-5.0, 0.0, 0.0, 0.0]))
+    # toward the target, at the rate, from the second step (the first force shows then)
+    assert np.allclose(force, [9 * LIMIT / T * DT, 0.0])
+    held.start_leg(np.array([3.0, 0.0, 0.0, 0.0]), retry=False)
+    assert not held(np.array([3.0, 0.0, 0.0, 0.0])).any()
+    assert not HeldShort(2, RHO, T, DT, math.inf).rate        # no limit: no integral action
+
+
+def test_the_force_holds_while_the_robot_makes_progress_or_speeds_up():
+    held = HeldShort(2, RHO, T, DT, LIMIT)
+    held.start_leg(np.array([-5.0, 0.0, 0.0, 0.0]), retry=True)
+    assert not held(np.array([-5.0, 0.0, 0.0, 0.0])).any()      # nothing has shown yet
+    f0 = held(np.array([-5.0, 0.0, 0.0, 0.0])).copy()
+    assert f0[0] > 0.0
+    # fast enough toward the target to enter its window in the time left: no growth
+    assert np.allclose(held(np.array([-5.0, 0.0, 1.0, 0.0])), f0)
+    # slower than it needs and slowing down: it grows
+    f1 = held(np.array([-5.0, 0.0, 0.1, 0.0])).copy()
+    assert f1[0] > f0[0]
+    # as slow, but speeding up fast enough to reach the speed it needs in the time left
+    assert np.allclose(held(np.array([-5.0, 0.0, 0.15, 0.0])), f1)
+    # speeding up too slowly to matter (a creep toward an asymptote): it grows
+    assert held(np.array([-5.0, 0.0, 0.1501, 0.0]))[0] > f1[0]
+
+
+def test_past_its_target_the_force_keeps_no_part_away_from_it():
+    """Friction holds a robot that overshot as it held it short: a force still pushing on
+    would have to unwind through twice the friction before the robot comes back (seen at
+    μ = 0.3: ±150 N hunting around the goal); its part away from the target is dropped."""
+    held = HeldShort(2, RHO, T, DT, LIMIT)
+    held.start_leg(np.array([-5.0, 0.0, 0.0, 0.0]), retry=True)
+    for _ in range(20):
+        held(np.array([-5.0, 0.0, 0.0, 0.0]))
+    assert held.force[0] > 50.0
+    force = held(np.array([0.5, 0.3, 0.0, 0.0]))     # past it: the target is at -x̄
+    toward = -np.array([0.5, 0.3]) / np.linalg.norm([0.5, 0.3])
+    assert float(force @ toward) >= -1e-12
+    assert abs(force[1]) > 0.0                          # the part across it is kept
+
+
+def test_under_odometry_noise_a_robot_at_rest_is_still_held_and_the_force_grows():
+    """σ_v = 0.05 m/s: the speed-up test allows for what noise adds to a speed, so a robot
+    at rest is not read as speeding up (the force grows on most steps)."""
+    rng = np.random.default_rng(0)
+    held = HeldShort(2, RHO, T, DT, LIMIT, sensing=Sensing(velocity_std=0.05))
+    held.start_leg(np.array([-5.0, 0.0, 0.0, 0.0]), retry=True)
+    for _ in range(100):
+        x = np.array([-5.0, 0.0, *rng.normal(0.0, 0.05, 2)])
+        force = held(x)
+    assert force[0] > 0.9 * 100 * LIMIT / T * DT
+
+
+def _walk(integral_action: bool, seconds: float = 60.0):
+    """The driver on the rover under a 28 N push against its first leg (as the field
+    bump's), its actor held at the Riccati gain: the waypoints it reached, the largest
+    |u| and how often the guard said held_short."""
+    K = _riccati_gain()
+    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=K, alpha_a=1e-9,
+                              probing_std=0.0, force_limit=LIMIT,
+                              integral_action=integral_action)
+    driver = LearningDriver(config, 4, 2, 0, np.random.default_rng(0))
+    plant = ref.Plant(*ref.rover(mass=MASS, stiffness=0.0, damping=DAMPING), DT)
+    push = np.array([-28.0, 0.0])
+    x = np.zeros(4)
+    driver.set_plan([[5.0, 0.0], [5.0, 5.0]], x, 0.0)
+    reached, umax, held = [], 0.0, 0
+    for k in range(int(seconds / DT)):
+        out = driver.step(k * DT, x)
+        if not reached or reached[-1] != tuple(out.leg_target):
+            reached.append(tuple(out.leg_target))
+        held += 'held_short' in out.policy_event
+        umax = max(umax, float(np.abs(out.u).max()))
+        x = plant.step(x, out.u + push)
+    return reached, x, umax, held
+
+
+def test_the_driver_walks_past_a_waypoint_a_push_holds_it_short_of():
+    """Through the controller and its leg sequencing: without integral action the robot
+    never leaves its first leg (held F_d / K_p = 1.25 m short, each retry's window smaller);
+    with it the guard reports held_short and the robot goes on to the last waypoint."""
+    reached, x, _, held = _walk(False, 30.0)
+    assert reached == [(5.0, 0.0)] and held == 0
+    assert abs(x[0] - (5.0 - 28.0 / _riccati_gain()[0, 0])) < 0.05
+    reached, x, umax, held = _walk(True)
+    assert reached == [(5.0, 0.0), (5.0, 5.0)] and held >= 1
+    assert np.linalg.norm(x[:2] - [5.0, 5.0]) < 1.0 and umax <= LIMIT
+
+
+def test_toward_the_next_waypoint_what_still_pushes_toward_it_is_carried():
+    """Friction holds the robot at every waypoint: waiting a whole horizon at each (as at
+    μ = 0.1 without the carry: 300 s and not at the goal, against 106 s with it) is avoided
+    by starting the next leg with the part of the force that points to its waypoint."""
+    held = HeldShort(2, RHO, T, DT, LIMIT)
+    held.start_leg(np.array([-5.0, 0.0, 0.0, 0.0]), retry=True)
+    for _ in range(21):
+        held(np.array([-5.0, 0.0, 0.0, 0.0]))
+    assert np.allclose(held.force, [100.0, 0.0])
+    held.start_leg(np.array([-3.0, -3.0, 0.0, 0.0]), retry=False)     # the next, 45° off
+    assert held.active and np.allclose(held.force, [50.0, 50.0])
+    held.start_leg(np.array([0.0, 4.0, 0.0, 0.0]), retry=False)      # behind it: dropped
+    assert not held.active and not held.force.any()
