@@ -210,7 +210,8 @@ class ControllerConfig:
     integral_action: bool = setting(True, doc='on a leg that follows one which ran its '
                                     'horizon short of the same waypoint, add a force toward '
                                     'it that grows by force_limit / T per second while the '
-                                    'robot is too slow to enter its window in the time left')
+                                    'robot is held (slower in any direction than it needs to '
+                                    'cover its distance to the window in a horizon)')
     """Conditional integral action (:mod:`rrtq_controller.held_short`): a steady push or
     Coulomb friction holds any linear state feedback short of its waypoint; false: none."""
     push_feedforward: bool = setting(False, doc='nominal variant with the observer: add to '

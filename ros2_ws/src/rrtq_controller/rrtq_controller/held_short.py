@@ -13,21 +13,27 @@ stops short (``benchmarks/results/riccati_gain.md``, the field bump: 14/20 goals
 :class:`HeldShort` is conditional integration, the classic anti-windup form of integral
 action. It is armed by a leg that follows one which ran its horizon toward the *same*
 waypoint (the event that says "held short"; nothing else arms it), and it integrates only
-while the robot is too slow to cover its distance to the window in a horizon and is not
-speeding up fast enough to become so,
+while the robot is held: slower, in any direction, than it needs to be to cover its
+distance to the window in a horizon, and not speeding up toward its target fast enough to
+become so,
 
-    a + max(a - a' - σ, 0) T / (l Δt) < (|p̄| - ρ D0) / T
+    |v| + max(a - a' - σ, 0) T / (l Δt) < (|p̄| - ρ D0) / T
 
 (|p̄| the robot's distance from its target, ê the unit vector from the robot to it,
 a = v · ê the speed toward it and a' that speed l steps earlier, l the lag a force takes to
 show, σ what noise alone can add to a speed: :class:`rrtq_controller.guard.Sensing`),
 adding ``rate`` Δt ê to its force each such step. So it grows until the robot moves toward
 its target, whatever holds it (a push, friction), and holds what it has while the robot
-makes enough progress or its feedback is still speeding it up (a retried leg starts at
-rest; a feedback that moves the robot needs a time constant to show it, and integrating
-through that would carry a bias into the rest of the leg). It does not wind up while the
-robot moves. The rate takes the actuator's limit in one horizon (``limit`` / T): any hold
-the actuator can overcome is overcome within one retried leg.
+moves or its feedback is still speeding it up (a retried leg starts at rest; a feedback
+that moves the robot needs a time constant to show it, and integrating through that would
+carry a bias into the rest of the leg). It does not wind up while the robot moves, toward
+its target or away: a robot a periodic push swings around its waypoint (its legs run their
+horizon too, the window D <= ρ D0 counting the speed) is not held, and a first version that
+integrated whenever the speed *toward* the target fell short did so through every half
+period the push carried the robot away: on the 110 kg rover under the 0.1 Hz sinusoid 5 of
+20 robots left the world against 1, last ten 1.28 against 1.02. The rate takes the
+actuator's limit in one horizon (``limit`` / T): any hold the actuator can overcome is
+overcome within one retried leg.
 
 Two rules keep it from doing harm where the hold is gone or changes with the direction:
 
@@ -133,7 +139,8 @@ class HeldShort:
         away = float(self.force @ toward)
         if away < 0.0:                 # past the target: no force away from it (no hunting)
             self.force = self.force - away * toward
-        speed = float(x[self.m:2 * self.m] @ toward) if x.size >= 2 * self.m else 0.0
+        velocity = x[self.m:2 * self.m] if x.size >= 2 * self.m else np.zeros(self.m)
+        speed = float(velocity @ toward)
         needed = (distance - self.window) / self.horizon
         self._recent.append(speed)
         lag = self.sensing.lag
@@ -144,7 +151,7 @@ class HeldShort:
         # m/s: what the speed gains in a horizon at its present rate
         gain = max(speed - self._recent[0] - self.sensing.difference, 0.0) * self.horizon / (
             lag * self.dt)
-        if speed + gain < needed:
+        if float(np.linalg.norm(velocity)) + gain < needed:
             grown = self.force + self.rate * self.dt * toward
             size = float(np.linalg.norm(grown))
             self.force = grown if size <= self.limit else grown * (self.limit / size)

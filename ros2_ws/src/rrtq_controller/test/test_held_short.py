@@ -139,7 +139,12 @@ def test_the_force_holds_while_the_robot_makes_progress_or_speeds_up():
     # as slow, but speeding up fast enough to reach the speed it needs in the time left
     assert np.allclose(held(np.array([-5.0, 0.0, 0.15, 0.0])), f1)
     # speeding up too slowly to matter (a creep toward an asymptote): it grows
-    assert held(np.array([-5.0, 0.0, 0.1501, 0.0]))[0] > f1[0]
+    f2 = held(np.array([-5.0, 0.0, 0.1501, 0.0])).copy()
+    assert f2[0] > f1[0]
+    # carried away from its target (a periodic push swinging it), or across: not held
+    assert np.allclose(held(np.array([-5.0, 0.0, -0.8, 0.0])), f2)
+    assert np.allclose(held(np.array([-5.0, 0.0, -0.8, 0.0])), f2)
+    assert np.allclose(held(np.array([-5.0, 0.0, 0.0, 0.6])), f2)
 
 
 def test_past_its_target_the_force_keeps_no_part_away_from_it():
