@@ -160,11 +160,12 @@ def plot_map(data: RunData, scenario: dict, path: pathlib.Path) -> None:
 
 
 _EVENT_STYLE = {'adopted': ('tab:green', '|'), 'rejected': ('tab:gray', 'x'),
-                'reverted': ('tab:red', 'v'), 'hold': ('tab:purple', 'v')}
+                'reverted': ('tab:red', 'v'), 'hold': ('tab:purple', 'v'),
+                'held_short': ('tab:orange', '^')}
 
 
 def _mark_policy_events(ax: plt.Axes, data: RunData) -> None:
-    """The guard's adoptions, rejections and reverts as marks along the panel's bottom."""
+    """The guard's events (integral action armed: held_short) as marks along the bottom."""
     if not data.policy_events:
         return
     low = ax.get_ylim()[0]
