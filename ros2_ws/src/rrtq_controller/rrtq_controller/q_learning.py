@@ -214,8 +214,9 @@ class QLearningController(PolicyIteration):
                           None if moved is None else np.asarray(moved, dtype=float))
         self._held = False   # a brake goes on (:meth:`step`)
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
-        self._held_short.start_leg(np.asarray(x0_bar, dtype=float), retry and not self._braking)
-        if self._held_short.active:
+        armed = retry and not self._braking
+        self._held_short.start_leg(np.asarray(x0_bar, dtype=float), armed)
+        if armed and self._held_short.active:
             self._events.append((PolicyEvent.HELD_SHORT,
                                  'the last leg ran its horizon short of this waypoint: integral '
                                  'action'))
