@@ -46,11 +46,7 @@ Two rules keep it from doing harm where the hold is gone or changes with the dir
   that part is not zero (friction holds the robot at every waypoint: at μ = 0.1 a mission
   that waited a horizon at each was 300 s and not at its goal, 106 s with the carry).
 
-The safety brake and a revert drop the force and disarm it. And the force grows only under a
-policy that damps every motion (its velocity gain's symmetric part positive semidefinite):
-a robot friction holds gives the critic no motion to learn its velocity feedback from, and
-at μ = 0.3 a policy adopted from such data (K_v with −371 N s/m on its diagonal) threw a
-robot that integral action had set free to 6.5 m/s within a second, into an obstacle.
+The safety brake and a revert drop the force and disarm it.
 
 Beyond the papers, like the guard. The Bellman rows take the force applied, this part
 included, so the critic stays consistent (as with the keep-off and the saturation).
@@ -69,13 +65,7 @@ from .guard import Sensing
 
 Array = NDArray[np.float64]
 
-__all__ = ['HeldShort', 'damps']
-
-
-def damps(velocity_gain: Array) -> bool:
-    """Whether u = -K_v v takes energy out of every motion (K_v + K_vᵀ >= 0)."""
-    k = np.asarray(velocity_gain, dtype=float)
-    return bool(np.linalg.eigvalsh(0.5 * (k + k.T)).min() >= 0.0)
+__all__ = ['HeldShort']
 
 
 @dataclass
@@ -136,18 +126,9 @@ class HeldShort:
         self.active = False
         self._recent.clear()
 
-    def __call__(self, x_bar: Array, velocity_gain: Array | None = None) -> Array:
-        """N (m,): the integral force for this step at state x̄.
-
-        ``velocity_gain``: the velocity block K_v (m x m) of the policy's feedback
-        u = -K x̄ now. Where its symmetric part is not positive semidefinite the policy
-        pushes some motion on, and the force does not grow: a robot set free would be
-        thrown (see the module).
-        """
+    def __call__(self, x_bar: Array) -> Array:
+        """N (m,): the integral force for this step at state x̄."""
         if not self.active:
-            return self.force
-        if velocity_gain is not None and not damps(velocity_gain):
-            self._recent.clear()
             return self.force
         x = np.asarray(x_bar, dtype=float)
         offset = x[:self.m]

@@ -338,9 +338,8 @@ class QLearningController(PolicyIteration):
             self._held_short.drop()
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
-            integral = self._held_short(x, self.gain(tau)[:, 2:2 + self.m]
-                                        if self._held_short.active else None)
-            u = np.clip(self._policy_u(phi, x) + noise + feedforward + integral, -limit, limit)
+            u = np.clip(self._policy_u(phi, x) + noise + feedforward + self._held_short(x),
+                        -limit, limit)
         velocity = x[2:2 + self.m]
         obstacles = (nearest, None if ahead is None else face_ahead(*ahead, velocity))
         for keep, obstacle in zip((self._keep_off, self._keep_ahead), obstacles, strict=True):

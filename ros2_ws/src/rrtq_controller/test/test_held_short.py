@@ -223,20 +223,3 @@ def test_toward_the_next_waypoint_what_still_pushes_toward_it_is_carried():
     assert held.active and np.allclose(held.force, [50.0, 50.0])
     held.start_leg(np.array([0.0, 4.0, 0.0, 0.0]), retry=False)      # behind it: dropped
     assert not held.active and not held.force.any()
-
-
-def test_the_force_does_not_grow_under_a_policy_that_pushes_motion_on():
-    """A robot friction holds gives the critic no motion to learn its velocity feedback
-    from; at μ = 0.3 a policy learned so (K_v with -371 N s/m on its diagonal) threw a robot
-    integral action had set free into an obstacle at 6.5 m/s. Under a velocity gain whose
-    symmetric part is not positive semidefinite the force holds; under a damping one (the
-    zero gain included) it grows."""
-    x = np.array([-5.0, 0.0, 0.0, 0.0])
-    for gain, grows in (([[213.7, -398.4], [88.4, -371.4]], False),      # recorded at μ = 0.3
-                        ([[60.0, 70.0], [-70.0, 60.0]], True),           # rotation, damping
-                        ([[0.0, 0.0], [0.0, 0.0]], True)):
-        held = HeldShort(2, RHO, T, DT, LIMIT)
-        held.start_leg(x, retry=True)
-        for _ in range(5):
-            force = held(x, np.array(gain))
-        assert bool(force[0] > 0.0) == grows, gain
