@@ -207,13 +207,15 @@ class ControllerConfig:
     not measure its disturbance can play against the equivalent input disturbance its
     observer identifies (:meth:`rrtq_controller.observer.Observer.acted`): m components, in
     the units of the forces, entering where the forces do (a matched disturbance)."""
-    integral_action: bool = setting(True, doc='on a leg that follows one which ran its '
+    integral_action: bool = setting(False, doc='opt-in: on a leg that follows one which ran its '
                                     'horizon short of the same waypoint, add a force toward '
                                     'it that grows by force_limit / T per second while the '
                                     'robot is held (slower in any direction than it needs to '
                                     'cover its distance to the window in a horizon)')
     """Conditional integral action (:mod:`rrtq_controller.held_short`): a steady push or
-    Coulomb friction holds any linear state feedback short of its waypoint; false: none."""
+    Coulomb friction holds any linear state feedback short of its waypoint. Off by default: at
+    μ = 0.3 it set free robots whose learned policy was anti-damping, and two of twenty hit an
+    obstacle (docs/features.md, issue 32)."""
     push_feedforward: bool = setting(False, doc='nominal variant with the observer: add to '
                                      'the policy\'s force the force that cancels the push '
                                      'the observer predicts from the low-pass filtered push '
