@@ -43,10 +43,13 @@ Two rules keep it from doing harm where the hold is gone or changes with the dir
   ±150 N);
 * toward another waypoint (the leg's window entered, or a new plan) only the part of the
   force that points at the new waypoint is carried, and integral action stays armed while
-  that part is not zero (friction holds the robot at every waypoint: at μ = 0.1 a mission
-  that waited a horizon at each was 300 s and not at its goal, 106 s with the carry).
+  that part is not zero (friction holds the robot at every waypoint: at μ = 0.1, seed 0 of
+  ``mujoco_friction.yaml``, a mission that waited a horizon at each was not at its goal in
+  300 s; with the carry it reached it at 170 s).
 
-The safety brake and a revert drop the force and disarm it.
+The safety brake and a revert drop the force and disarm it. Opt-in
+(``controller.integral_action``): at μ = 0.3 it set free robots whose learned policy was
+anti-damping, and two of twenty hit an obstacle (docs/features.md, issue 32).
 
 Beyond the papers, like the guard. The Bellman rows take the force applied, this part
 included, so the critic stays consistent (as with the keep-off and the saturation).

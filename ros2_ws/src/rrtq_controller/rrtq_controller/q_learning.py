@@ -188,7 +188,7 @@ class QLearningController(PolicyIteration):
         retry = False  # the last leg ran its horizon toward this leg's waypoint
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
-            retry = ran_out and moved is not None and not np.any(np.asarray(moved) != 0.0)
+            retry = ran_out and moved is not None and not np.any(moved)
             entered = not ran_out if completed is None else completed
             if entered:
                 self.completed_leg()
