@@ -47,7 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.linalg import solve_discrete_are
 from scipy.signal import lfilter
-from scipy.stats import norm
+from scipy.stats import chi2, norm
 
 Array = NDArray[np.float64]
 
@@ -77,6 +77,10 @@ class OneStepModel:
     """a_1..a_p of e_k = Σ a_i e_{k-i} + ε_k (common to every state component)."""
     residual_cov: Array
     """(n x n): covariance of e, the part of a step the forces and the state do not explain."""
+    friction: Array | None = None
+    """C (n x m): the effect over a step of Coulomb friction, sign(v_i) per velocity
+    component (:meth:`Observer._coulomb`); None where the data do not show it. Part of e
+    (a push: what the forces and the state do not explain), not of u_eff's model."""
     gamma_error: float = math.inf
     """How far Γ may be off, relative (assessed only for an observer that ``reads_pushes``;
     inf: not assessed, no push is read through the model): z ‖SE(Γ)‖_F / σ_min(Γ) (z at :data:`GAMMA_FALSE_ALARM`,
@@ -130,8 +134,11 @@ class Observer:
     """
 
     def __init__(self, n: int, m: int, lags: int = 3, memory: int = 4000, ar: int = 2,
-                 reads_pushes: bool = False) -> None:
+                 reads_pushes: bool = False, velocity: slice | None = None) -> None:
         self.n, self.m, self.lags, self.ar = n, m, lags, ar
+        self.velocity = velocity
+        """The states that are the velocity, one per input (the rover's x̄ = (p̄, v):
+        ``slice(m, 2m)``), for the Coulomb friction columns (:meth:`_coulomb`); None: none."""
         self.reads_pushes = reads_pushes
         """Whether pushes are read through its models (:meth:`last_push`, the push
         feed-forward, whose forces then carry the push's estimate): each identification's AR
@@ -196,6 +203,16 @@ class Observer:
         n, m, J = self.n, self.m, self.lags
         p = self.ar if ar is None else ar
         lagged = _lagged(u, J)
+        if self.velocity is not None:
+            # a component held at rest while a force acts on it (friction up to its level,
+            # or a push that balances the force) shows no effect of that force: fitted, such
+            # transitions pull Γ toward zero (at mu = 0.3 Γ came out at 0-20 % of the plant's
+            # and Φ's velocity part near zero, and the guard flew proposals through that)
+            v, rest = x[:, self.velocity], self.rest()
+            held = np.any((np.abs(v[:-1]) <= rest) & (np.abs(v[1:]) <= rest)
+                          & (u[:-1] != 0.0), axis=1)
+            fits = np.ones(len(x), dtype=bool) if fits is None else fits.copy()
+            fits[:-1] &= ~held
         # a constant column takes a steady push (a slope, a payload), which otherwise the
         # states it displaced would explain in part, biasing Φ; it stays in the residual
         regress = np.hstack([x[:-1], lagged[:-1], np.ones((len(x) - 1, 1))])
@@ -220,12 +237,96 @@ class Observer:
         w, a, _ = min(candidates, key=lambda fit: fit[2])
         if not np.all(np.isfinite(w)):
             return None                   # no model in data that cannot give one
-        e = (target - regress[:, :-1] @ w[:-1])[same]     # the steady push included
-        gammas = w[n:-1].reshape(J + 1, m, n).transpose(0, 2, 1)
+        friction = None
+        if self.velocity is not None:
+            coulomb = self._coulomb(x, u, segment, usable, p, a, fits)
+            if coulomb is not None:
+                regress, usable, w, a, friction = coulomb
+        k = n + (J + 1) * m               # Φ and the Γ_j; the Coulomb and steady parts follow
+        e = (target - regress[:, :k] @ w[:k])[same]     # the steady push (and friction) included
+        gammas = w[n:k].reshape(J + 1, m, n).transpose(0, 2, 1)
         error = (_gamma_error(_ar_filter(regress, a)[usable], _ar_filter(target, a)[usable], w,
                               n, m, J) if self.reads_pushes else math.inf)
         return OneStepModel(phi=w[:n].T.copy(), gammas=gammas, ar=a,
-                            residual_cov=np.atleast_2d(np.cov(e.T)), gamma_error=error)
+                            residual_cov=np.atleast_2d(np.cov(e.T)), gamma_error=error,
+                            friction=friction)
+
+    def _coulomb(self, x: Array, u: Array, segment: NDArray[np.int64], usable: NDArray[np.bool_],
+                 p: int, a0: Array, fits: NDArray[np.bool_] | None
+                 ) -> tuple[Array, NDArray[np.bool_], Array, Array, Array] | None:
+        """The fit with Coulomb friction, where the data show it: (regressors, usable, W, AR, C).
+
+        Coulomb friction resists a moving robot with a force of constant size against each
+        velocity component, an input the linear model has not: least squares reads it as
+        damping (at the low speeds the robot learns at, a relay looks like a steep viscous
+        term), and a critic learning through a model that damps more than the plant learns
+        a policy that cancels the surplus with an anti-damping velocity gain, which throws
+        the robot once it moves fast (MuJoCo, mu = 0.3: -371 N s/m, 6.5 m/s within a
+        second, a contact). So the transitions get a column sign(v_i) per velocity
+        component i (0 within the speed odometry noise makes at the false-alarm rate:
+        :meth:`rest`), their coefficients C the friction's effect over a step, and the
+        transitions where a component stands still at both ends are left out of this fit
+        (whatever holds a robot at rest, friction up to its level, balances the force of
+        the moment, not a constant: the free motion under that force is not in them).
+        Kept only where the data call C at :data:`GAMMA_FALSE_ALARM` (a Wald test on C's
+        n·m coefficients, χ²): on a plant without friction the model is the one without
+        the columns (up to that rate). Model-free toward the plant like the rest of the
+        fit: the columns are functions of the measured velocity, as the constant is.
+        """
+        n, m = self.n, self.m
+        assert self.velocity is not None
+        rest = self.rest()
+        v = x[:, self.velocity]
+        sign = np.where(np.abs(v) > rest, np.sign(v), 0.0)
+        steady = np.all(sign[:-1] * sign[1:] > 0, axis=1)   # every component moving one way
+        moving = steady if fits is None else (fits[:-1] & steady)
+        use = usable & _with_the_p_before(moving & (segment[1:] == segment[:-1]), p)
+        base = n + (self.lags + 1) * m
+        regress = np.hstack([x[:-1], _lagged(u, self.lags)[:-1], sign[:-1],
+                             np.ones((len(x) - 1, 1))])
+        if use.sum() < 10 * regress.shape[1]:
+            return None
+        w, a, likelihood = _cochrane_orcutt(regress, x[1:], use, p, a0)
+        if not (np.all(np.isfinite(w)) and math.isfinite(likelihood)):
+            return None
+        Z, E = _ar_filter(regress, a)[use], _ar_filter(x[1:] - regress @ w, a)[use]
+        # exact data leave a residual of rounding alone, against which any C is significant:
+        # the variance is at least that of a relative precision of 1e-9 of the states
+        variance = np.maximum(np.mean(E ** 2, axis=0),
+                              (1e-9 * np.sqrt(np.mean(x[1:][use] ** 2, axis=0))) ** 2)
+        block = slice(base, base + m)
+        # (ZᵀZ)⁻¹ through standardised columns with the fit's ridge: a sign column the data
+        # make collinear (a robot that only ever moved one way: sign = the constant) gets
+        # the variance of what the data do not determine, and no call
+        scale = np.sqrt(np.mean(Z ** 2, axis=0)) + 1e-300
+        eig, vec = np.linalg.eigh((Z / scale).T @ (Z / scale))
+        with np.errstate(all='ignore'):
+            inverse = ((vec / (np.maximum(eig, 0.0) + RIDGE * len(Z))) @ vec.T
+                       / np.outer(scale, scale))[block, block]
+        try:
+            information = np.linalg.inv(inverse)
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(information)):
+            return None
+        C = w[block]                                   # (m, n): column i's effect on x̄
+        moved = variance > 0.0             # a component that never moved: nothing to test
+        wald = float(sum(C[:, j] @ information @ C[:, j] / variance[j]
+                         for j in np.flatnonzero(moved)))
+        if not moved.any() or wald <= chi2.ppf(1.0 - GAMMA_FALSE_ALARM, m * int(moved.sum())):
+            return None
+        return regress, use, w, a, np.asarray(C.T, dtype=float)
+
+    def rest(self) -> Array:
+        """m/s per velocity component: the speed below which it counts as standing still.
+
+        Two-sided normal quantile of the odometry's σ_v at :data:`GAMMA_FALSE_ALARM`; with
+        exact odometry 1e-9 m/s (zero to the precision of a simulator's solver: a MuJoCo base
+        held by its friction loss shows 1e-12 m/s).
+        """
+        assert self.velocity is not None
+        sigma = np.sqrt(self.variance[self.velocity])
+        return np.maximum(norm.ppf(1.0 - GAMMA_FALSE_ALARM / 2) * sigma, 1e-9)
 
     def update(self) -> bool:
         """Identify the model from the kept steps; smooth the states with it if odometry is noisy.

@@ -185,6 +185,13 @@ class PolicyIteration(WeightReadout):
             self._note(PolicyEvent.REJECTED, f'critic: {_misfit(self.critic.last)} > '
                                              f'{c.max_fit_residual:g}')
             return
+        if c.rollout_test and self.observer is not None and self.observer.model is None:
+            # nothing to fly a proposal through: the robot has not moved enough to identify
+            # its motion (a base friction holds), and a critic fitted to a robot that stands
+            # still says nothing of its velocity feedback (at mu = 0.3 it proposed
+            # anti-damping gains of +200 N s/m, adopted, that later threw the robot)
+            self._note(PolicyEvent.REJECTED, 'no identified model of the motion yet')
+            return
         Wa, Wd = self._target
         tau0, x0, *_ = window.samples()
         u_applied = window.applied()

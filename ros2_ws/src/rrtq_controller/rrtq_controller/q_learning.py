@@ -133,7 +133,8 @@ class QLearningController(PolicyIteration):
         self._t0 = 0.0
         self._prev: tuple[float, Array, Array] | None = None
         self.observer = (Observer(n, m, c.observer_lags, c.observer_memory, c.observer_ar,
-                                  reads_pushes=c.cancels_push)
+                                  reads_pushes=c.cancels_push,
+                                  velocity=slice(m, 2 * m) if n == 2 * m else None)
                          if c.observes else None)
         """The one-step model the critic learns through (:mod:`observer`); None: the rows take
         the odometry and the commanded force as they are."""
