@@ -268,9 +268,9 @@ class Observer:
         transitions where a component stands still at both ends are left out of this fit
         (whatever holds a robot at rest, friction up to its level, balances the force of
         the moment, not a constant: the free motion under that force is not in them).
-        Kept only where the data call C at :data:`GAMMA_FALSE_ALARM` (a Wald test on C's
-        n·m coefficients, χ²): on a plant without friction the model is the one without
-        the columns (up to that rate). Model-free toward the plant like the rest of the
+        Kept only where the data call C at :data:`GAMMA_FALSE_ALARM` (a Wald test on its
+        velocity rows, χ² with m² degrees of freedom): on a plant without friction the model
+        is the one without the columns (but at that rate). Model-free toward the plant like the rest of the
         fit: the columns are functions of the measured velocity, as the constant is.
         """
         n, m = self.n, self.m
@@ -290,10 +290,6 @@ class Observer:
         if not (np.all(np.isfinite(w)) and math.isfinite(likelihood)):
             return None
         Z, E = _ar_filter(regress, a)[use], _ar_filter(x[1:] - regress @ w, a)[use]
-        # exact data leave a residual of rounding alone, against which any C is significant:
-        # the variance is at least that of a relative precision of 1e-9 of the states
-        variance = np.maximum(np.mean(E ** 2, axis=0),
-                              (1e-9 * np.sqrt(np.mean(x[1:][use] ** 2, axis=0))) ** 2)
         block = slice(base, base + m)
         # (ZᵀZ)⁻¹ through standardised columns with the fit's ridge: a sign column the data
         # make collinear (a robot that only ever moved one way: sign = the constant) gets
@@ -303,17 +299,21 @@ class Observer:
         with np.errstate(all='ignore'):
             inverse = ((vec / (np.maximum(eig, 0.0) + RIDGE * len(Z))) @ vec.T
                        / np.outer(scale, scale))[block, block]
+        # the test on the velocity rows, where friction acts (a position row's noise is the
+        # velocity row's, integrated: summing both would count it twice): vec(C_v) has the
+        # covariance Σ_v ⊗ (ZᵀZ)⁻¹_CC, so W = tr(Σ_v⁻¹ C_vᵀ (ZᵀZ)⁻¹_CC⁻¹ C_v) is χ²(m²) without
+        # friction; exact data leave a residual of rounding alone, against which any C is
+        # significant: Σ_v is at least that of a relative precision of 1e-9 of the speeds
+        C = w[block]                                   # (m, n): column i's effect on x̄
+        Cv, Ev = C[:, self.velocity], E[:, self.velocity]
+        floor = (1e-9 * np.sqrt(np.mean(x[1:][use][:, self.velocity] ** 2, axis=0))) ** 2
+        sigma = Ev.T @ Ev / len(Ev) + np.diag(floor)
         try:
             information = np.linalg.inv(inverse)
+            wald = float(np.trace(np.linalg.solve(sigma, Cv.T @ information @ Cv)))
         except np.linalg.LinAlgError:
             return None
-        if not np.all(np.isfinite(information)):
-            return None
-        C = w[block]                                   # (m, n): column i's effect on x̄
-        moved = variance > 0.0             # a component that never moved: nothing to test
-        wald = float(sum(C[:, j] @ information @ C[:, j] / variance[j]
-                         for j in np.flatnonzero(moved)))
-        if not moved.any() or wald <= chi2.ppf(1.0 - GAMMA_FALSE_ALARM, m * int(moved.sum())):
+        if not math.isfinite(wald) or wald <= chi2.ppf(1.0 - GAMMA_FALSE_ALARM, m * m):
             return None
         return regress, use, w, a, np.asarray(C.T, dtype=float)
 

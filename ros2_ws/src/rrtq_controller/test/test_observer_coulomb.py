@@ -1,0 +1,98 @@
+"""The observer on a base with Coulomb friction: its model of the linear part stays right.
+
+Ground truth: the plant integrated here at 1 ms (viscous damping c, Coulomb friction F
+per axis, sticking at rest while the force is within F), which the observer never sees;
+its exact one-step effects over Δt while the velocity keeps its sign are
+Φ_vv = e^{-cΔt/m}, Γ_vv = (1 - e^{-cΔt/m}) / c and the friction's -F Γ_vv.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rrtq_controller.observer import Observer
+
+DT, MASS, DAMPING = 0.05, 40.0, 45.0
+PHI_VV = math.exp(-DAMPING * DT / MASS)
+GAMMA_VV = (1.0 - PHI_VV) / DAMPING
+
+
+def _coulomb_run(friction: float, *, steps: int = 3000, seed: int = 0, disturbance: float = 0.0,
+                 gain: tuple[float, float] = (30.0, 60.0), probing: float = 60.0):
+    """Legs of 10 s to random targets under a PD gain and probing; (x̄, u, segment) per step."""
+    rng = np.random.default_rng(seed)
+    p, v = np.zeros(2), np.zeros(2)
+    xs, us, segments = [], [], []
+    target = np.zeros(2)
+    sub = 50
+    h = DT / sub
+    for k in range(steps):
+        if k % 200 == 0:
+            target = rng.uniform(-10.0, 10.0, 2)
+        x = np.concatenate([p - target, v])
+        u = np.clip(-gain[0] * x[:2] - gain[1] * x[2:] + rng.normal(0.0, probing, 2), -200, 200)
+        w = disturbance * MASS * rng.normal(0.0, 1.0, 2) / math.sqrt(DT) * math.sqrt(DT)
+        xs.append(x)
+        us.append(u)
+        segments.append(k // 200)
+        for _ in range(sub):
+            for i in range(2):
+                force = u[i] + w[i]
+                if v[i] == 0.0 and abs(force) <= friction:
+                    continue                                   # stuck
+                direction = np.sign(v[i]) if v[i] != 0.0 else np.sign(force)
+                new = v[i] + h * (force - DAMPING * v[i] - friction * direction) / MASS
+                if v[i] != 0.0 and np.sign(new) != np.sign(v[i]) and abs(force) <= friction:
+                    new = 0.0                                  # stops and sticks
+                v[i] = new
+            p = p + h * v
+    return np.array(xs), np.array(us), np.array(segments)
+
+
+def _model(x, u, segments, velocity):
+    observer = Observer(4, 2, velocity=velocity)
+    for k in range(len(x)):
+        observer.record(x[k], u[k], int(segments[k]))
+    assert observer.update()
+    assert observer.model is not None
+    return observer.model
+
+
+@pytest.mark.parametrize('friction', [39.0, 118.0])
+def test_friction_columns_keep_the_linear_part_right(friction):
+    x, u, segments = _coulomb_run(friction)
+    plain = _model(x, u, segments, None)
+    model = _model(x, u, segments, slice(2, 4))
+    vv = np.diag(model.phi[2:, 2:])
+    gamma = np.diag(model.gamma[2:])
+    assert model.friction is not None
+    np.testing.assert_allclose(vv, PHI_VV, rtol=0.005)
+    np.testing.assert_allclose(gamma, GAMMA_VV, rtol=0.01)
+    # the friction's effect over a step, per unit of the input's: -F
+    np.testing.assert_allclose(np.diag(model.friction[2:]) / gamma, -friction, rtol=0.03)
+    # without the columns the same data give a plant that barely answers its force
+    assert np.all(np.abs(np.diag(plain.gamma[2:]) / GAMMA_VV - 1.0) > 0.1)
+
+
+@pytest.mark.parametrize('seed', [0, 1, 2])
+def test_without_friction_the_model_is_the_one_without_the_columns(seed):
+    x, u, segments = _coulomb_run(0.0, seed=seed, disturbance=0.5)
+    model = _model(x, u, segments, slice(2, 4))
+    plain = _model(x, u, segments, None)
+    assert model.friction is None
+    np.testing.assert_allclose(model.phi, plain.phi)
+    np.testing.assert_allclose(model.gammas, plain.gammas)
+
+
+def test_a_robot_friction_holds_still_gives_no_model():
+    """Forces within the friction never move it: no transition shows what a force does."""
+    x, u, segments = _coulomb_run(500.0, gain=(0.0, 0.0), probing=60.0)
+    assert np.all(x[:, 2:] == 0.0)
+    observer = Observer(4, 2, velocity=slice(2, 4))
+    for k in range(len(x)):
+        observer.record(x[k], u[k], int(segments[k]))
+    assert not observer.update()
+    assert observer.model is None
