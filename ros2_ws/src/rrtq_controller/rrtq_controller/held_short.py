@@ -88,7 +88,7 @@ class HeldShort:
     force: Array = field(init=False)
     """N (m,): what is added to the policy's force."""
     active: bool = False
-    """Whether this leg is a retry toward the waypoint the last leg ran out on."""
+    """Whether the force may grow on this leg (the last ran its horizon, or carried a force)."""
     window: float = 0.0
     """m: ρ D0 of this leg."""
     sensing: Sensing = field(default_factory=Sensing)
@@ -104,24 +104,21 @@ class HeldShort:
         return self.limit / self.horizon if math.isfinite(self.limit) else 0.0
 
     def start_leg(self, x0_bar: Array, retry: bool) -> None:
-        """A new leg from x̄0; ``retry``: the last leg ran its horizon toward this waypoint."""
+        """A new leg from x̄0; ``retry``: the last leg ran its horizon (short of its window)."""
         x0_bar = np.asarray(x0_bar, dtype=float)
         self.window = self.rho * float(np.linalg.norm(x0_bar))
         self._recent.clear()
         if self.rate <= 0.0:
             return
-        if retry:
-            self.active = True
-            return
-        # toward another waypoint: what still pushes toward it is carried, the rest dropped
+        # what still pushes toward this leg's waypoint is carried, the rest dropped
         offset = x0_bar[:self.m]
         distance = float(np.linalg.norm(offset))
         along = float(self.force @ (-offset / distance)) if distance > 0.0 else 0.0
-        if self.active and along > 0.0:
+        if (self.active or retry) and along > 0.0:
             self.force = along * (-offset / distance)
         else:
             self.force = np.zeros(self.m)
-            self.active = False
+        self.active = retry or (self.active and along > 0.0)
 
     def drop(self) -> None:
         """The brake acts (or the leg's policy was reverted): no integral force, until a retry."""

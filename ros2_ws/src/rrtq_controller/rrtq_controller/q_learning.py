@@ -186,10 +186,10 @@ class QLearningController(PolicyIteration):
         watch measures from the reference leg's target, :class:`guard.DivergenceWatch`).
         """
         renew = True   # a fresh divergence reference: first leg, completed leg, a revert
-        retry = False  # the last leg ran its horizon toward this leg's waypoint
+        retry = False  # the last leg ran its horizon short of its window
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
-            retry = ran_out and moved is not None and not np.any(moved)
+            retry = ran_out
             entered = not ran_out if completed is None else completed
             if entered:
                 self.completed_leg()
@@ -219,7 +219,7 @@ class QLearningController(PolicyIteration):
         self._held_short.start_leg(np.asarray(x0_bar, dtype=float), armed)
         if armed and self._held_short.active:
             self._events.append((PolicyEvent.HELD_SHORT,
-                                 'the last leg ran its horizon short of this waypoint: integral '
+                                 'the last leg ran its horizon short of its window: integral '
                                  'action'))
 
     def renew_horizon(self, x0_bar: Array, t: float) -> None:

@@ -25,6 +25,18 @@ D > ``divergence_distance`` D0, twice the start by default: a relative excess of
 use already does if that is more (the guard then stops an escalation, where it starts). The
 finite-horizon LQ optimum passes: on this plant its position gain is positive at every time
 to go and from rest it only ever closes the offset.
+
+A policy can pass that test and still throw a moving robot: a velocity gain that feeds
+speed back (anti-damping) beyond the plant's own damping does nothing to a robot at rest
+whose position gain is near zero, and everything to one that moves. Against friction the
+critic proposed such gains (+20 to +55 N s/m on both axes of a 45 kg/s base, position gain
+near zero; before the observer modelled the friction, -371 N s/m on the diagonal of the
+adopted K_v in another run took the robot to 6.5 m/s within a second, into an obstacle).
+So the rollouts also start from a robot *moving* at unit speed at its target (every
+state beyond the positions at unit size, the worst direction), and compare the growth of
+those states, ‖Ψ_vv(τ_s → τ)‖, with coasting's (at least 1, as standing still's is): a
+dissipative loop only slows the robot (its energy falls), and a speed that grows beyond
+the same tolerance is a loop the plant's damping does not hold.
 """
 
 from __future__ import annotations
@@ -52,6 +64,8 @@ class AwayFrom:
     """‖Ψ(τ_s → τ)‖ under the policy."""
     still: float
     """The same with no force (the identified model's own drift)."""
+    moving: bool = False
+    """From a robot moving at unit speed at its target (the growth of its speed), not at rest."""
 
     @property
     def excess(self) -> float:
@@ -59,6 +73,10 @@ class AwayFrom:
         return self.growth / self.still - 1.0
 
     def __str__(self) -> str:
+        if self.moving:
+            return (f'speeds a moving robot up from time to go {self.start:.2f} s to '
+                    f'{self.growth:.3g} x its speed at {self.tau:.2f} s (coasting: '
+                    f'{self.still:.3g} x; excess {self.excess:.3g}) under the identified model')
         return (f'carries a robot at rest from time to go {self.start:.2f} s to '
                 f'{self.growth:.3g} x its offset at {self.tau:.2f} s (standing still: '
                 f'{self.still:.3g} x; excess {self.excess:.3g}) under the identified model')
@@ -85,16 +103,23 @@ def closed_loop(model: OneStepModel, gains: Array) -> Array:
     return T
 
 
-def worst_growth(transitions: Array, positions: int, start: int) -> Array:
-    """‖Ψ(start → k)‖ for k = start+1 .. S: the position block, from rest (S - start,)."""
+def worst_growth(transitions: Array, positions: int, start: int,
+                 states: slice | None = None) -> Array:
+    """‖Ψ(start → k)‖ for k = start+1 .. S: the position block, from rest (S - start,).
+
+    ``states``: another block of the state (its own start directions and growth), e.g.
+    the velocities ``slice(m, n)``: from a robot moving at its target.
+    """
     size = transitions.shape[1]
-    X = np.zeros((size, positions))
-    X[:positions, :positions] = np.eye(positions)
-    blocks = np.empty((len(transitions) - start, positions, positions))
+    block = slice(0, positions) if states is None else states
+    width = len(range(size)[block])
+    X = np.zeros((size, width))
+    X[block, :] = np.eye(width)
+    blocks = np.empty((len(transitions) - start, width, width))
     with np.errstate(over='ignore', invalid='ignore'):
         for i, T in enumerate(transitions[start:]):
             X = T @ X
-            blocks[i] = X[:positions]
+            blocks[i] = X[block]
     # a loop (or an identified model) that grows without bound overflows: infinite growth
     out = np.full(len(blocks), np.inf)
     finite = np.isfinite(blocks).all(axis=(1, 2))
@@ -120,26 +145,36 @@ class Rollout:
                        for t in starts]
         still = closed_loop(model, np.zeros((steps, self.m, n)))
         self._still = [np.maximum(worst_growth(still, self.m, k), 1.0) for k in self.starts]
+        self._speeds = slice(self.m, n) if n > self.m else None
+        """The states beyond the positions (the velocities), for the rollouts from motion."""
+        self._coasting = ([np.maximum(worst_growth(still, self.m, k, self._speeds), 1.0)
+                           for k in self.starts] if self._speeds is not None else [])
 
     def away(self, gain: Callable[[float], Array]) -> AwayFrom:
-        """Where the policy ``gain`` (τ -> K̂(τ), m x n) carries a robot at rest farthest away.
+        """Where the policy ``gain`` (τ -> K̂(τ), m x n) carries a robot farthest away.
 
-        The start and step of the largest excess over standing still (negative where it
-        closes the offset everywhere).
+        The start and step of the largest excess over standing still (from rest at a unit
+        offset) or over coasting (moving at unit speed at the target): negative where it
+        closes the offset and slows the robot everywhere.
         """
         moved = closed_loop(self.model, np.array([gain(float(t)) for t in self.taus]))
         worst: AwayFrom | None = None
-        for start, base in zip(self.starts, self._still, strict=True):
-            ours = worst_growth(moved, self.m, start)
-            with np.errstate(invalid='ignore'):
-                # where the model's own drift overflows too it tells nothing: no excess there
-                ratio = np.where(np.isinf(base), 1.0, ours / base)
-            k = int(np.argmax(ratio))
-            if worst is None or ratio[k] - 1.0 > worst.excess:
-                tau = float(self.taus[start])
-                worst = AwayFrom(tau, tau - self.dt * (k + 1),
-                                 float(ours[k]) if np.isfinite(base[k]) else 1.0,
-                                 float(base[k]) if np.isfinite(base[k]) else 1.0)
+        families: list[tuple[list[Array], slice | None]] = [(self._still, None)]
+        if self._speeds is not None:
+            families.append((self._coasting, self._speeds))
+        for bases, states in families:
+            for start, base in zip(self.starts, bases, strict=True):
+                ours = worst_growth(moved, self.m, start, states)
+                with np.errstate(invalid='ignore'):
+                    # where the model's own drift overflows too it tells nothing: no excess
+                    ratio = np.where(np.isinf(base), 1.0, ours / base)
+                k = int(np.argmax(ratio))
+                if worst is None or ratio[k] - 1.0 > worst.excess:
+                    tau = float(self.taus[start])
+                    worst = AwayFrom(tau, tau - self.dt * (k + 1),
+                                     float(ours[k]) if np.isfinite(base[k]) else 1.0,
+                                     float(base[k]) if np.isfinite(base[k]) else 1.0,
+                                     moving=states is not None)
         assert worst is not None, 'no start'
         return worst
 

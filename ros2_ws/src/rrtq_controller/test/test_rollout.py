@@ -5,6 +5,8 @@ Ground truth: the finite-horizon Riccati gain of the true rover (scipy, through
 step-by-step simulation of the delayed loop written out here.
 """
 
+import math
+
 import numpy as np
 import pytest
 from scipy.linalg import expm
@@ -150,3 +152,26 @@ def test_a_loop_that_overflows_is_infinite_growth_not_an_error():
     blowing = carries_away(stable, lambda tau: -1e6 * np.ones((2, 4)), T, DT, STARTS)
     assert blowing.excess > 1e100                      # rejected, whatever the tolerance
     assert worst_growth(closed_loop(wild, np.zeros((200, 2, 4))), 2, 0)[-1] == np.inf
+
+
+@pytest.mark.parametrize('delay', [0, 2])
+def test_a_velocity_gain_that_feeds_speed_back_beyond_the_damping_throws_a_moving_robot(delay):
+    """No position gain, u = +k v: a robot at rest stays; a moving one speeds up if k > c.
+
+    The rover's damping is c = 45 N s/m: k = 60 leaves -15 (the speed grows e^{15 t / 40}),
+    k = 30 leaves +15 (it decays). From rest neither moves the robot at all.
+    """
+    def feeding(k):
+        return lambda tau: np.hstack([np.zeros((2, 2)), -k * np.eye(2)])
+
+    exact = model(delay, stiffness=0.0)
+    thrown = carries_away(exact, feeding(60.0), T, DT, STARTS)
+    assert thrown.moving and thrown.excess > 1.0
+    if delay == 0:    # the speed's own recursion v_{k+1} = (e^{-cΔt/m} + k (1 - e^{-cΔt/m}) / c) v_k
+        decay = math.exp(-45.0 * DT / 40.0)
+        per_step = decay + 60.0 * (1.0 - decay) / 45.0
+        assert math.isclose(thrown.growth, per_step ** round(T / DT), rel_tol=1e-6)
+    held = carries_away(exact, feeding(30.0), T, DT, STARTS)
+    assert held.excess <= 1e-9
+    optimum = carries_away(exact, riccati_gain(0.0), T, DT, STARTS)
+    assert optimum.excess <= 1e-9
