@@ -11,8 +11,11 @@ never goes on. No learning fixes it: every linear state feedback, the optimal on
 stops short (``benchmarks/results/riccati_gain.md``, the field bump: 14/20 goals).
 
 :class:`HeldShort` is conditional integration, the classic anti-windup form of integral
-action. It is armed by a leg that follows one which ran its horizon toward the *same*
-waypoint (the event that says "held short"; nothing else arms it), and it integrates only
+action. It is armed by a leg that follows one which ran its horizon short of its window
+(the event that says "held short"; nothing else arms it) -- toward the same waypoint or the
+next: the planner moves the waypoint of a robot that stalls on (``stall_time``), so a robot
+friction holds at its start gets a new waypoint each leg, and arming only toward the same
+one never armed it at μ = 0.3 -- and it integrates only
 while the robot is held: slower, in any direction, than it needs to be to cover its
 distance to the window in a horizon, and not speeding up toward its target fast enough to
 become so,
@@ -73,7 +76,7 @@ __all__ = ['HeldShort']
 
 @dataclass
 class HeldShort:
-    """The integral force of a leg retried toward the same waypoint (see the module).
+    """The integral force of a leg that follows one held short (see the module).
 
     ``m`` inputs (the first ``m`` states are the position, the next ``m`` the velocity, as
     the rover's x̄ = (p - p_r, v)); ``rho`` the leg window's ρ; ``horizon`` T (s); ``dt`` Δt (s);
