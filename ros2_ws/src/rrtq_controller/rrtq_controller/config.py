@@ -207,6 +207,13 @@ class ControllerConfig:
     not measure its disturbance can play against the equivalent input disturbance its
     observer identifies (:meth:`rrtq_controller.observer.Observer.acted`): m components, in
     the units of the forces, entering where the forces do (a matched disturbance)."""
+    friction_compensation: bool = setting(True, doc='with the observer: where it has '
+                                          'identified Coulomb friction, add the friction '
+                                          'level per axis in the direction of motion (at '
+                                          'rest: of the force), so that the robot moves '
+                                          'as its linear part would')
+    """Coulomb friction compensation from the identified friction
+    (:meth:`rrtq_controller.observer.Observer.friction`); false: none."""
     integral_action: bool = setting(False, doc='opt-in: on a leg that follows one which ran its '
                                     'horizon short of the same waypoint, add a force toward '
                                     'it that grows by force_limit / T per second while the '

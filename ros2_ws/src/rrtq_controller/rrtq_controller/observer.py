@@ -81,6 +81,10 @@ class OneStepModel:
     """C (n x m): the effect over a step of Coulomb friction, sign(v_i) per velocity
     component (:meth:`Observer._coulomb`); None where the data do not show it. Part of e
     (a push: what the forces and the state do not explain), not of u_eff's model."""
+    friction_level: Array | None = None
+    """N per input: the friction level, -(Γ_v⁻¹ C_v)_ii (None with :attr:`friction`)."""
+    friction_error: Array | None = None
+    """N per input: the standard error of :attr:`friction_level`."""
     gamma_error: float = math.inf
     """How far Γ may be off, relative (assessed only for an observer that ``reads_pushes``;
     inf: not assessed, no push is read through the model): z ‖SE(Γ)‖_F / σ_min(Γ) (z at :data:`GAMMA_FALSE_ALARM`,
@@ -237,24 +241,27 @@ class Observer:
         w, a, _ = min(candidates, key=lambda fit: fit[2])
         if not np.all(np.isfinite(w)):
             return None                   # no model in data that cannot give one
-        friction = None
+        friction = level = error = None
         if self.velocity is not None:
             coulomb = self._coulomb(x, u, segment, usable, p, a, fits)
             if coulomb is not None:
-                regress, usable, w, a, friction = coulomb
+                regress, usable, w, a, (friction, level, error) = coulomb
         k = n + (J + 1) * m               # Φ and the Γ_j; the Coulomb and steady parts follow
         e = (target - regress[:, :k] @ w[:k])[same]     # the steady push (and friction) included
         gammas = w[n:k].reshape(J + 1, m, n).transpose(0, 2, 1)
-        error = (_gamma_error(_ar_filter(regress, a)[usable], _ar_filter(target, a)[usable], w,
-                              n, m, J) if self.reads_pushes else math.inf)
+        gamma_error = (_gamma_error(_ar_filter(regress, a)[usable], _ar_filter(target, a)[usable],
+                                    w, n, m, J) if self.reads_pushes else math.inf)
         return OneStepModel(phi=w[:n].T.copy(), gammas=gammas, ar=a,
-                            residual_cov=np.atleast_2d(np.cov(e.T)), gamma_error=error,
-                            friction=friction)
+                            residual_cov=np.atleast_2d(np.cov(e.T)), gamma_error=gamma_error,
+                            friction=friction, friction_level=level, friction_error=error)
 
     def _coulomb(self, x: Array, u: Array, segment: NDArray[np.int64], usable: NDArray[np.bool_],
                  p: int, a0: Array, fits: NDArray[np.bool_] | None
-                 ) -> tuple[Array, NDArray[np.bool_], Array, Array, Array] | None:
-        """The fit with Coulomb friction, where the data show it: (regressors, usable, W, AR, C).
+                 ) -> tuple[Array, NDArray[np.bool_], Array, Array,
+                            tuple[Array, Array, Array]] | None:
+        """The fit with Coulomb friction where the data show it.
+
+        (regressors, usable, W, AR, (C, the level F̂ per input, its standard error)).
 
         Coulomb friction resists a moving robot with a force of constant size against each
         velocity component, an input the linear model has not: least squares reads it as
@@ -315,7 +322,34 @@ class Observer:
             return None
         if not math.isfinite(wald) or wald <= chi2.ppf(1.0 - GAMMA_FALSE_ALARM, m * m):
             return None
-        return regress, use, w, a, np.asarray(C.T, dtype=float)
+        # the friction per unit of force, F_i = -(Γ_v⁻¹ C_v)_ii, and its standard error:
+        # Var((Γ_v⁻¹ C_v)_ki) = (ZᵀZ)⁻¹_ii (Γ_v⁻¹ Σ_v Γ_v⁻ᵀ)_kk (Γ's own error left out)
+        gamma_v = w[n:base].reshape(self.lags + 1, m, n).sum(axis=0)[:, self.velocity].T
+        try:
+            per_force = np.linalg.solve(gamma_v, Cv.T)
+            spread = np.linalg.solve(gamma_v, np.linalg.solve(gamma_v, sigma).T)
+        except np.linalg.LinAlgError:
+            return None
+        level = -np.diag(per_force)
+        error = np.sqrt(np.maximum(np.diag(inverse) * np.diag(spread), 0.0))
+        return regress, use, w, a, (np.asarray(C.T, dtype=float), np.asarray(level, dtype=float),
+                                    np.asarray(error, dtype=float))
+
+    def friction(self) -> Array | None:
+        """N per input: the Coulomb friction the data show at least (None: none identified).
+
+        The lower one-sided confidence bound of the identified level at
+        :data:`GAMMA_FALSE_ALARM`, F̂ - z SE (at least 0): compensated by more than its
+        friction a robot is pushed on along its motion, a positive feedback; by less, what
+        is left acts as friction does. A level the data barely determine (a robot that
+        moved one way only: the sign column is the constant's) has a large SE and no bound.
+        """
+        model = self.model
+        if model is None or model.friction_level is None or model.friction_error is None:
+            return None
+        z = float(norm.ppf(1.0 - GAMMA_FALSE_ALARM))
+        return np.asarray(np.maximum(model.friction_level - z * model.friction_error, 0.0),
+                          dtype=float)
 
     def rest(self) -> Array:
         """m/s per velocity component: the speed below which it counts as standing still.

@@ -339,8 +339,8 @@ class QLearningController(PolicyIteration):
             self._held_short.drop()
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
-            u = np.clip(self._policy_u(phi, x) + noise + feedforward + self._held_short(x),
-                        -limit, limit)
+            u = self._policy_u(phi, x) + noise + feedforward + self._held_short(x)
+            u = np.clip(u + self._friction_force(u, x), -limit, limit)
         velocity = x[2:2 + self.m]
         obstacles = (nearest, None if ahead is None else face_ahead(*ahead, velocity))
         for keep, obstacle in zip((self._keep_off, self._keep_ahead), obstacles, strict=True):
@@ -370,6 +370,29 @@ class QLearningController(PolicyIteration):
                              policy_event=';'.join(e.value for e, _ in events),
                              policy_reason='; '.join(r for _, r in events))
         return u
+
+    def _friction_force(self, u: Array, x: Array) -> Array:
+        """N: Coulomb friction compensation, the identified level per axis (zero without one).
+
+        Along each velocity component that moves, the friction level in its direction (the
+        friction it meets while moving, cancelled); along one at rest (within the speed odometry
+        noise makes, :meth:`observer.Observer.rest`), the level in the direction of the force
+        ``u`` (what it takes to break free, so the force acts on the robot as it would without
+        friction). So the robot moves as its linear part would, which is what the critic
+        learns the Q-function of (the equivalent input carries the friction and this force,
+        and nets them). Classic Coulomb compensation (e.g. Armstrong-Hélouvry, Dupont and
+        Canudas de Wit 1994); the level is the observer's, identified from odometry and the
+        forces (no model given). Not while braking: there the friction helps.
+        """
+        observer = self.observer
+        if not self.config.friction_compensation or observer is None or observer.velocity is None:
+            return np.zeros(self.m)
+        level = observer.friction()
+        if level is None:
+            return np.zeros(self.m)
+        v = x[observer.velocity]
+        moving = np.abs(v) > observer.rest()
+        return np.asarray(level * np.where(moving, np.sign(v), np.sign(u)), dtype=float)
 
     @property
     def d_hat(self) -> Array:

@@ -96,3 +96,45 @@ def test_a_robot_friction_holds_still_gives_no_model():
         observer.record(x[k], u[k], int(segments[k]))
     assert not observer.update()
     assert observer.model is None
+
+
+@pytest.mark.parametrize('friction', [39.0, 118.0])
+def test_the_friction_level_and_its_lower_bound(friction):
+    """The level per axis within 3 % of F, its lower 99 % bound below F and above 0.9 F."""
+    x, u, segments = _coulomb_run(friction)
+    observer = Observer(4, 2, velocity=slice(2, 4))
+    for k in range(len(x)):
+        observer.record(x[k], u[k], int(segments[k]))
+    assert observer.update()
+    model = observer.model
+    assert model is not None and model.friction_level is not None
+    np.testing.assert_allclose(model.friction_level, friction, rtol=0.03)
+    bound = observer.friction()
+    assert bound is not None
+    assert np.all(bound <= model.friction_level) and np.all(bound > 0.9 * friction)
+
+
+@pytest.mark.parametrize('on', [True, False])
+def test_the_controller_compensates_the_identified_friction(on):
+    """Along a moving axis the level in the direction of motion, along one at rest in the
+    force's; nothing with ``friction_compensation: false`` or before friction is identified."""
+    from rrtq_controller.config import ControllerConfig
+    from rrtq_controller.q_learning import QLearningController
+
+    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, friction_compensation=on)
+    controller = QLearningController(config, 4, 2, 0, np.random.default_rng(0))
+    observer = controller.observer
+    assert observer is not None and observer.velocity == slice(2, 4)
+    x = np.array([1.0, -1.0, 0.5, 0.0])           # moving +x, y at rest
+    u = np.array([-10.0, 20.0])
+    assert np.all(controller._friction_force(u, x) == 0.0)      # nothing identified yet
+    xs, us, segments = _coulomb_run(118.0)
+    for k in range(len(xs)):
+        observer.record(xs[k], us[k], int(segments[k]))
+    assert observer.update()
+    level = observer.friction()
+    assert level is not None
+    expected = level * np.array([1.0, 1.0]) if on else np.zeros(2)
+    np.testing.assert_allclose(controller._friction_force(u, x), expected)
+    np.testing.assert_allclose(controller._friction_force(-u, x),
+                               level * np.array([1.0, -1.0]) if on else np.zeros(2))

@@ -49,7 +49,7 @@ _CTRL_KEYS = (
     'forces', 'critic_law', 'actor_law', 'initial_gain', 'probing_std', 'probing_decay',
     'probing_line_fraction', 'force_limit', 'measured_disturbance', 'observer',
     'disturbance_estimate', 'rollout_test', 'push_feedforward', 'push_feedforward_law',
-    'push_filter_time', 'integral_action', 'model',
+    'push_filter_time', 'integral_action', 'friction_compensation', 'model',
     'vf_lpc',
 )  # fmt: skip
 # planner key -> the settings dataclass it belongs to
@@ -295,7 +295,8 @@ def read_controller(r: Reader, raw: Any, plant: PlantConfig, world: World) -> Co
         **{name: r.boolean(data.get(name, field_default(ControllerConfig, name)),
                            f'controller.{name}')
            for name in ('measured_disturbance', 'observer', 'disturbance_estimate',
-                        'rollout_test', 'push_feedforward', 'integral_action')},
+                        'rollout_test', 'push_feedforward', 'integral_action',
+                        'friction_compensation')},
         **weights, **numbers)
 
 
