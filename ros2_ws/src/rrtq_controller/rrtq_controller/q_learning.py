@@ -44,6 +44,20 @@ from .stability import gain_warnings
 Array = NDArray[np.float64]
 
 
+def _overcome(held: Array, friction: Array) -> Array:
+    """N: the integral force and the friction compensation together, friction counted once.
+
+    Both overcome the same friction where they point the same way: integral action grew
+    until the robot moved, the compensation adds the identified level. Summed, a robot the
+    integral force had set free got the friction twice (MuJoCo μ = 0.3, seed 15: 381 N
+    along an axis with 118 N of friction, 5.9 m/s). Per axis the larger of the two where
+    they agree in sign, their sum where they do not.
+    """
+    same = np.sign(held) == np.sign(friction)
+    larger = np.where(np.abs(held) >= np.abs(friction), held, friction)
+    return np.asarray(np.where(same, larger, held + friction), dtype=float)
+
+
 def _pad(W: Array, rows: int) -> Array:
     return np.vstack([W, np.zeros((rows, W.shape[1]))])
 
@@ -339,8 +353,10 @@ class QLearningController(PolicyIteration):
             self._held_short.drop()
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
-            u = self._policy_u(phi, x) + noise + feedforward + self._held_short(x)
-            u = np.clip(u + self._friction_force(u, x), -limit, limit)
+            u = self._policy_u(phi, x) + noise + feedforward
+            held = self._held_short(x)
+            friction = self._friction_force(u + held, x)
+            u = np.clip(u + _overcome(held, friction), -limit, limit)
         velocity = x[2:2 + self.m]
         obstacles = (nearest, None if ahead is None else face_ahead(*ahead, velocity))
         for keep, obstacle in zip((self._keep_off, self._keep_ahead), obstacles, strict=True):

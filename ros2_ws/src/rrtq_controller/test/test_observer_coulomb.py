@@ -138,3 +138,12 @@ def test_the_controller_compensates_the_identified_friction(on):
     np.testing.assert_allclose(controller._friction_force(u, x), expected)
     np.testing.assert_allclose(controller._friction_force(-u, x),
                                level * np.array([1.0, -1.0]) if on else np.zeros(2))
+
+
+def test_integral_action_and_compensation_count_the_friction_once():
+    from rrtq_controller.q_learning import _overcome
+
+    held, friction = np.array([150.0, -30.0, 20.0, 0.0]), np.array([118.0, 118.0, -118.0, 40.0])
+    np.testing.assert_allclose(_overcome(held, friction), [150.0, 88.0, -98.0, 40.0])
+    np.testing.assert_allclose(_overcome(np.zeros(2), np.array([5.0, -5.0])), [5.0, -5.0])
+    np.testing.assert_allclose(_overcome(np.array([5.0, -5.0]), np.zeros(2)), [5.0, -5.0])
