@@ -207,13 +207,16 @@ class ControllerConfig:
     not measure its disturbance can play against the equivalent input disturbance its
     observer identifies (:meth:`rrtq_controller.observer.Observer.acted`): m components, in
     the units of the forces, entering where the forces do (a matched disturbance)."""
-    friction_compensation: bool = setting(True, doc='with the observer: where it has '
+    friction_compensation: bool = setting(False, doc='opt-in, with the observer: where it has '
                                           'identified Coulomb friction, add the friction '
                                           'level per axis in the direction of motion (at '
                                           'rest: of the force), so that the robot moves '
                                           'as its linear part would')
     """Coulomb friction compensation from the identified friction
-    (:meth:`rrtq_controller.observer.Observer.friction`); false: none."""
+    (:meth:`rrtq_controller.observer.Observer.friction`); false: none. Opt-in: under odometry
+    noise, a delay and a sinusoid the friction columns' test calls friction that is not
+    there (levels up to 14 N, bound 6.6 N, on a frictionless rover), and a compensation
+    switching with the sign of a noisy speed cost a mission its goal (400 s against 179 s)."""
     integral_action: bool = setting(False, doc='opt-in: on a leg that follows one which ran its '
                                     'horizon short of the same waypoint, add a force toward '
                                     'it that grows by force_limit / T per second while the '
