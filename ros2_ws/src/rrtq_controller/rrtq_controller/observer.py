@@ -243,7 +243,7 @@ class Observer:
             return None                   # no model in data that cannot give one
         friction = level = error = None
         if self.velocity is not None:
-            coulomb = self._coulomb(x, u, segment, usable, p, a, fits)
+            coulomb = self._coulomb(x, lagged, segment, usable, p, a, fits)
             if coulomb is not None:
                 regress, usable, w, a, (friction, level, error) = coulomb
         k = n + (J + 1) * m               # Φ and the Γ_j; the Coulomb and steady parts follow
@@ -255,7 +255,7 @@ class Observer:
                             residual_cov=np.atleast_2d(np.cov(e.T)), gamma_error=gamma_error,
                             friction=friction, friction_level=level, friction_error=error)
 
-    def _coulomb(self, x: Array, u: Array, segment: NDArray[np.int64], usable: NDArray[np.bool_],
+    def _coulomb(self, x: Array, lagged: Array, segment: NDArray[np.int64], usable: NDArray[np.bool_],
                  p: int, a0: Array, fits: NDArray[np.bool_] | None
                  ) -> tuple[Array, NDArray[np.bool_], Array, Array,
                             tuple[Array, Array, Array]] | None:
@@ -289,7 +289,7 @@ class Observer:
         moving = steady if fits is None else (fits[:-1] & steady)
         use = usable & _with_the_p_before(moving & (segment[1:] == segment[:-1]), p)
         base = n + (self.lags + 1) * m
-        regress = np.hstack([x[:-1], _lagged(u, self.lags)[:-1], sign[:-1],
+        regress = np.hstack([x[:-1], lagged[:-1], sign[:-1],
                              np.ones((len(x) - 1, 1))])
         if use.sum() < 10 * regress.shape[1]:
             return None
