@@ -248,7 +248,7 @@ class Observer:
                 regress, usable, w, a, (friction, level, error) = coulomb
         k = n + (J + 1) * m               # Φ and the Γ_j; the Coulomb and steady parts follow
         e = (target - regress[:, :k] @ w[:k])[same]     # the steady push (and friction) included
-        gammas = w[n:k].reshape(J + 1, m, n).transpose(0, 2, 1)
+        gammas = _gammas(w, n, m, J)
         gamma_error = (_gamma_error(_ar_filter(regress, a)[usable], _ar_filter(target, a)[usable],
                                     w, n, m, J) if self.reads_pushes else math.inf)
         return OneStepModel(phi=w[:n].T.copy(), gammas=gammas, ar=a,
@@ -301,11 +301,7 @@ class Observer:
         # (ZᵀZ)⁻¹ through standardised columns with the fit's ridge: a sign column the data
         # make collinear (a robot that only ever moved one way: sign = the constant) gets
         # the variance of what the data do not determine, and no call
-        scale = np.sqrt(np.mean(Z ** 2, axis=0)) + 1e-300
-        eig, vec = np.linalg.eigh((Z / scale).T @ (Z / scale))
-        with np.errstate(all='ignore'):
-            inverse = ((vec / (np.maximum(eig, 0.0) + RIDGE * len(Z))) @ vec.T
-                       / np.outer(scale, scale))[block, block]
+        inverse = _ridge_inverse(Z)[0][block, block]
         # the test on the velocity rows, where friction acts (a position row's noise is the
         # velocity row's, integrated: summing both would count it twice): vec(C_v) has the
         # covariance Σ_v ⊗ (ZᵀZ)⁻¹_CC, so W = tr(Σ_v⁻¹ C_vᵀ (ZᵀZ)⁻¹_CC⁻¹ C_v) is χ²(m²) without
@@ -324,7 +320,7 @@ class Observer:
             return None
         # the friction per unit of force, F_i = -(Γ_v⁻¹ C_v)_ii, and its standard error:
         # Var((Γ_v⁻¹ C_v)_ki) = (ZᵀZ)⁻¹_ii (Γ_v⁻¹ Σ_v Γ_v⁻ᵀ)_kk (Γ's own error left out)
-        gamma_v = w[n:base].reshape(self.lags + 1, m, n).sum(axis=0)[:, self.velocity].T
+        gamma_v = _gammas(w, n, m, self.lags).sum(axis=0)[self.velocity]
         try:
             per_force = np.linalg.solve(gamma_v, Cv.T)
             spread = np.linalg.solve(gamma_v, np.linalg.solve(gamma_v, sigma).T)
@@ -699,21 +695,21 @@ def _lagged(u: Array, lags: int) -> Array:
                       for j in range(lags + 1)])
 
 
+def _gammas(w: Array, n: int, m: int, lags: int) -> Array:
+    """(Γ_0, ..., Γ_J), (J + 1, n, m): the input columns of a fit ``w`` of x̄ on (x̄, lagged u, ...)."""
+    return np.asarray(w[n:n + (lags + 1) * m].reshape(lags + 1, m, n).transpose(0, 2, 1), dtype=float)
+
+
 def _gamma_error(regress: Array, target: Array, w: Array, n: int, m: int, lags: int) -> float:
     """:attr:`OneStepModel.gamma_error` of the fit ``w`` of ``target`` on ``regress``."""
-    scale = np.sqrt(np.mean(regress ** 2, axis=0)) + 1e-300
-    z = regress / scale
-    ridge = RIDGE * len(z)
-    eig, vec = np.linalg.eigh(z.T @ z)
-    ridge_share = float(ridge / (max(eig.min(), 0.0) + ridge))
+    inverse, ridge_share = _ridge_inverse(regress)
     # Γ = Σ_j Γ_j: the sum over the lag columns of each input
     pick = np.zeros((len(w), m))
     for j in range(lags + 1):
         pick[n + j * m + np.arange(m), np.arange(m)] = 1.0
     with np.errstate(all='ignore'):      # a column that never moved: its scale is ~1e-300
-        inverse = (vec / (np.maximum(eig, 0.0) + ridge)) @ vec.T / np.outer(scale, scale)
         spread = np.diag(pick.T @ inverse @ pick)                      # per input
-    dof = max(len(z) - len(w), 1)
+    dof = max(len(regress) - len(w), 1)
     sigma2 = np.sum((target - regress @ w) ** 2, axis=0) / dof      # per state component
     if not (np.all(np.isfinite(spread)) and np.all(np.isfinite(sigma2))):
         return math.inf
@@ -725,6 +721,22 @@ def _gamma_error(regress: Array, target: Array, w: Array, n: int, m: int, lags: 
     if smallest <= 0.0:
         return math.inf
     return z_value * se / smallest + ridge_share
+
+
+def _ridge_inverse(regress: Array) -> tuple[Array, float]:
+    """((ZᵀZ + ridge)⁻¹ in the columns' own units, the share the ridge takes of the weakest direction).
+
+    Through standardised columns with :func:`_least_squares`' ridge, so a column the data
+    leave undetermined (collinear with another, or one that never moved: its scale is
+    ~1e-300) gets the variance of what the data do not say, not a singular matrix.
+    """
+    scale = np.sqrt(np.mean(regress ** 2, axis=0)) + 1e-300
+    z = regress / scale
+    ridge = RIDGE * len(z)
+    eig, vec = np.linalg.eigh(z.T @ z)
+    with np.errstate(all='ignore'):
+        inverse = (vec / (np.maximum(eig, 0.0) + ridge)) @ vec.T / np.outer(scale, scale)
+    return inverse, float(ridge / (max(eig.min(), 0.0) + ridge))
 
 
 def _least_squares(regress: Array, target: Array) -> Array:
