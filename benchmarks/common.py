@@ -114,6 +114,9 @@ def rows_benchmark(name: str, description: str, rows: dict[str, tuple[str, list[
     ap.add_argument('--keep-others', action='store_true',
                     help='keep the saved rows not given with --rows (each says when and at '
                     'which commit it was measured)')
+    ap.add_argument('--set', action='append', default=[], dest='extra', metavar='KEY=VALUE',
+                    help='a setting for every row, after the row\'s own (e.g. '
+                    'controller.integral_action=true; the rows\' commands say so)')
     ap.add_argument('--tabulate', action='store_true',
                     help='read the rows from the tables an earlier run left in --runs '
                     'instead of running them')
@@ -125,7 +128,7 @@ def rows_benchmark(name: str, description: str, rows: dict[str, tuple[str, list[
         print(f'{name}: {row_name} ({label})', file=sys.stderr, flush=True)
         row = bench_row(row_name, base, args.runs, ['--seeds', str(args.seeds), '--engine',
                                                     args.engine, '--workers', str(args.workers)],
-                        [*settings, *row_settings], run=not args.tabulate)
+                        [*settings, *row_settings, *args.extra], run=not args.tabulate)
         row['label'] = label
         row['measured'] = ({k: row['machine'].get(k) for k in ('date', 'commit')}
                            if args.tabulate else measured)
