@@ -64,12 +64,12 @@ Two rules keep it from doing harm where the hold is gone or changes with the dir
 The safety brake and a revert drop the force and disarm it. Opt-in
 (``controller.integral_action``). It was made so when, at μ = 0.3, it set free robots whose
 learned policy was anti-damping and two of twenty hit an obstacle (a defect of learning
-against friction, fixed since: docs/observer.md §3). It stays so because on a robot
-without friction it costs leg cost under noise: once armed (a zero gain before the first
-model runs a leg's horizon) the force grows on the steps where noise makes a robot that
-is speeding up look held, and the carry keeps it from leg to leg (odometry noise, a delay
-and a white push: last ten 1.185 against 1.10 allowed, a 10-20 N force carried through
-the last legs; the rover under white 1.0 m/s²: 1.072 on 10 seeds).
+against friction, fixed since: docs/observer.md §3), and it stays so because on by default
+it touched an obstacle once more: odometry noise, a 2-step delay and the 0.1 Hz sinusoid,
+seed 3 of ``robot_side``, 0.9 mm deep, 0.3 s after it armed on a leg the keep-off had held
+along an obstacle's face (the keep-off pushing 60 N off it; with the integral force it
+pushed 21 N). Integral action does not yet know that a robot the safety shell holds is not
+held short.
 
 Beyond the papers, like the guard. The Bellman rows take the force applied, this part
 included, so the critic stays consistent (as with the keep-off and the saturation).

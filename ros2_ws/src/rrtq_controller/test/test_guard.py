@@ -244,7 +244,9 @@ def test_a_leg_that_leaves_its_line_brakes_to_rest_and_keeps_the_policy_that_com
     discarded as the diverging one), and it takes over again once the robot is at rest."""
     A, B = ref.rover(mass=110.0, stiffness=0.0, damping=15.0)
     plant = ref.Plant(A, B, DT)
-    cfg = ControllerConfig(force_limit=200.0, probing_std=0.0)
+    # the guard alone: the test's first leg "runs" its horizon between its start_legs,
+    # which would arm integral action on the next
+    cfg = ControllerConfig(force_limit=200.0, probing_std=0.0, integral_action=False)
     ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(0))
     good = np.array([[20.0, 0.0, 60.0, 0.0], [0.0, 20.0, 0.0, 60.0]])
     ctrl.start_leg(np.array([-4.0, 0.0, 0.0, 0.0]), 0.0)
@@ -275,7 +277,9 @@ def test_a_completed_policy_that_leaves_its_line_twice_is_discarded():
     in between, discards it for the hold, and the robot stays near where it was."""
     A, B = ref.rover(mass=110.0, stiffness=0.0, damping=15.0)
     plant = ref.Plant(A, B, DT)
-    cfg = ControllerConfig(force_limit=200.0, probing_std=0.0)
+    # the guard alone: the test's first leg "runs" its horizon between its start_legs,
+    # which would arm integral action on the next
+    cfg = ControllerConfig(force_limit=200.0, probing_std=0.0, integral_action=False)
     ctrl = QLearningController(cfg, 4, 2, 0, np.random.default_rng(0))
     bad = np.array([[-20.0, 0.0, -10.0, 0.0], [0.0, 20.0, 0.0, 60.0]])   # pushes away along x
     ctrl.start_leg(np.array([0.0, -4.0, 0.0, 0.0]), 0.0)
