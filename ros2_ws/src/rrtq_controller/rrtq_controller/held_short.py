@@ -51,25 +51,26 @@ Two rules keep it from doing harm where the hold is gone or changes with the dir
   through twice the friction first: at μ = 0.3 the robot hunted ±1 m around its goal at
   ±150 N);
 * toward another waypoint (the leg's window entered, or a new plan) only the part of the
-  force that points at the new waypoint is carried, along the axes the robot starts the
-  new leg held on (slower along it than the new leg needs), and integral action stays
-  armed while that part is not zero (friction holds the robot at every waypoint: at
-  μ = 0.1, seed 0 of ``mujoco_friction.yaml``, a mission that waited a horizon at each was
-  not at its goal in 300 s; with the carry it reached it at 170 s). A robot that reaches
-  its next leg moving as fast as it needs carries nothing and disarms: a force grown once
-  and carried from leg to leg with nothing to unwind it biased every later leg (odometry
-  noise, a delay, a white push: 10-20 N through the last legs, last ten 1.185). A retry
-  keeps what it has.
+  force that points at the new waypoint is carried, and integral action stays armed while
+  that part is not zero (friction holds the robot at every waypoint: at μ = 0.1, seed 0 of
+  ``mujoco_friction.yaml``, a mission that waited a horizon at each was not at its goal in
+  300 s; with the carry it reached it at 170 s). Carrying it only along the axes on which
+  the robot starts the new leg slower than it needs (08ea4ec) mended what the carry costs
+  under noise (a force grown once, carried from leg to leg with nothing to unwind it: last
+  ten 1.185 on a noisy, delayed, white-push mission, 1.072 on the rover under white
+  1.0 m/s²; 1.010 with it) but halved the goals at μ = 0.3 (5/10 against 20/20) and slowed
+  μ = 0.1 (237 s against 149 s): a robot friction lets go of reaches its next leg moving,
+  and waits a horizon there. Reverted; integral action is opt-in, for friction.
 
 The safety brake and a revert drop the force and disarm it. Opt-in
 (``controller.integral_action``). It was made so when, at μ = 0.3, it set free robots whose
 learned policy was anti-damping and two of twenty hit an obstacle (a defect of learning
-against friction, fixed since: docs/observer.md §3), and it stays so because on by default
-it touched an obstacle once more: odometry noise, a 2-step delay and the 0.1 Hz sinusoid,
-seed 3 of ``robot_side``, 0.9 mm deep, 0.3 s after it armed on a leg the keep-off had held
-along an obstacle's face (the keep-off pushing 60 N off it; with the integral force it
-pushed 21 N). Integral action does not yet know that a robot the safety shell holds is not
-held short.
+against friction, fixed since: docs/observer.md §3). It stays so: on by default it costs
+leg cost under noise through the carry (above), and with the carry rule that mended that it
+touched an obstacle once (odometry noise, a 2-step delay and the 0.1 Hz sinusoid, seed 3 of
+``robot_side``, 0.9 mm deep, 0.3 s after it armed on a leg the keep-off had held along an
+obstacle's face: the keep-off pushing 60 N off it, 21 N with the integral force). Integral
+action does not yet know that a robot the safety shell holds is not held short.
 
 Beyond the papers, like the guard. The Bellman rows take the force applied, this part
 included, so the critic stays consistent (as with the keep-off and the saturation).
@@ -130,21 +131,15 @@ class HeldShort:
         self._recent.clear()
         if self.rate <= 0.0:
             return
-        # what still pushes toward this leg's waypoint is carried, along the axes the robot
-        # starts the leg held on; the rest dropped
+        # what still pushes toward this leg's waypoint is carried, the rest dropped
         offset = x0_bar[:self.m]
         distance = float(np.linalg.norm(offset))
-        toward = -offset / distance if distance > 0.0 else np.zeros(self.m)
-        along = float(self.force @ toward)
-        velocity = (x0_bar[self.m:2 * self.m] if x0_bar.size >= 2 * self.m
-                    else np.zeros(self.m))
-        held = retry | (np.abs(velocity) < (distance - self.window) / self.horizon
-                        * np.abs(toward))
-        if (self.active or retry) and along > 0.0 and held.any():
-            self.force = np.where(held, along * toward, 0.0)
+        along = float(self.force @ (-offset / distance)) if distance > 0.0 else 0.0
+        if (self.active or retry) and along > 0.0:
+            self.force = along * (-offset / distance)
         else:
             self.force = np.zeros(self.m)
-        self.active = retry or bool(self.force.any())
+        self.active = retry or (self.active and along > 0.0)
 
     def drop(self) -> None:
         """The brake acts (or the leg's policy was reverted): no integral force, until a retry."""

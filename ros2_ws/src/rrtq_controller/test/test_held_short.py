@@ -252,24 +252,3 @@ def test_toward_the_next_waypoint_what_still_pushes_toward_it_is_carried():
     held.start_leg(np.array([0.0, 4.0, 0.0, 0.0]), retry=False)      # behind it: dropped
     assert not held.active and not held.force.any()
 
-
-def test_a_robot_that_reaches_its_next_leg_moving_carries_nothing_into_it():
-    """A force grown once (noise made a robot that speeds up look held) and carried from
-    leg to leg with nothing to unwind it biased every later leg (odometry noise, a delay, a
-    white push: 10-20 N through the last legs, last ten 1.185). It is carried only along
-    the axes on which the robot starts the new leg held: slower than the leg needs."""
-    def grown():
-        held = HeldShort(2, RHO, T, DT, LIMIT)
-        held.start_leg(np.array([-5.0, 0.0, 0.0, 0.0]), retry=True)
-        for _ in range(21):
-            held(np.array([-5.0, 0.0, 0.0, 0.0]))
-        return held
-    held = grown()              # at the next waypoint moving at 1 m/s along the new leg
-    held.start_leg(np.array([-4.0, 0.0, 1.0, 0.0]), retry=False)
-    assert not held.active and not held.force.any()
-    held = grown()              # slower than the 0.34 m/s the new leg needs: carried
-    held.start_leg(np.array([-4.0, 0.0, 0.2, 0.0]), retry=False)
-    assert held.active and np.allclose(held.force, [100.0, 0.0])
-    held = grown()              # a retry keeps what it has, moving or not
-    held.start_leg(np.array([-4.0, 0.0, 1.0, 0.0]), retry=True)
-    assert held.active and np.allclose(held.force, [100.0, 0.0])
