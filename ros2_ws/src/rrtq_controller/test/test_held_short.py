@@ -251,4 +251,3 @@ def test_toward_the_next_waypoint_what_still_pushes_toward_it_is_carried():
     assert held.active and np.allclose(held.force, [50.0, 50.0])
     held.start_leg(np.array([0.0, 4.0, 0.0, 0.0]), retry=False)      # behind it: dropped
     assert not held.active and not held.force.any()
-
