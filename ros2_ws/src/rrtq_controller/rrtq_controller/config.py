@@ -217,7 +217,7 @@ class ControllerConfig:
     noise, a delay and a sinusoid the friction columns' test calls friction that is not
     there (levels up to 14 N, bound 6.6 N, on a frictionless rover), and a compensation
     switching with the sign of a noisy speed cost a mission its goal (400 s against 179 s)."""
-    integral_action: bool = setting(False, doc='opt-in: on a leg that follows one which ran its '
+    integral_action: bool = setting(True, doc='on a leg that follows one which ran its '
                                     'horizon short of the same waypoint, add a force toward '
                                     'it that grows by force_limit / T per second along each '
                                     'axis the robot is held on (slower along it than it needs '

@@ -124,8 +124,14 @@ class HeldShort:
         """N/s: the growth of the force while the robot is held (the limit in one horizon)."""
         return self.limit / self.horizon if math.isfinite(self.limit) else 0.0
 
-    def start_leg(self, x0_bar: Array, retry: bool) -> None:
-        """A new leg from x̄0; ``retry``: the last leg ran its horizon (short of its window)."""
+    def start_leg(self, x0_bar: Array, retry: bool, explained: Array | None = None) -> None:
+        """A new leg from x̄0; ``retry``: the last leg ran its horizon (short of its window).
+
+        ``explained``: N per axis, the hold the data explain (the observer's friction level,
+        its lower confidence bound; zero where it has identified none): toward a new
+        waypoint (not a retry) the carried force keeps at most that much per axis. None:
+        nothing is known, the whole part toward the new waypoint is carried.
+        """
         x0_bar = np.asarray(x0_bar, dtype=float)
         self.window = self.rho * float(np.linalg.norm(x0_bar))
         self._recent.clear()
@@ -136,10 +142,14 @@ class HeldShort:
         distance = float(np.linalg.norm(offset))
         along = float(self.force @ (-offset / distance)) if distance > 0.0 else 0.0
         if (self.active or retry) and along > 0.0:
-            self.force = along * (-offset / distance)
+            carried = along * (-offset / distance)
+            if not retry and explained is not None:
+                bound = np.abs(np.asarray(explained, dtype=float))
+                carried = np.clip(carried, -bound, bound)
+            self.force = np.asarray(carried, dtype=float)
         else:
             self.force = np.zeros(self.m)
-        self.active = retry or (self.active and along > 0.0)
+        self.active = retry or (self.active and bool(np.any(self.force != 0.0)))
 
     def drop(self) -> None:
         """The brake acts (or the leg's policy was reverted): no integral force, until a retry."""
@@ -147,8 +157,12 @@ class HeldShort:
         self.active = False
         self._recent.clear()
 
-    def __call__(self, x_bar: Array) -> Array:
-        """N (m,): the integral force for this step at state x̄."""
+    def __call__(self, x_bar: Array, grow: bool = True) -> Array:
+        """N (m,): the integral force for this step at state x̄.
+
+        ``grow`` false: something else holds the robot this step (the safety shell's
+        keep-off pushed on the last one): the force keeps its value and does not grow.
+        """
         if not self.active:
             return self.force
         x = np.asarray(x_bar, dtype=float)
@@ -172,7 +186,7 @@ class HeldShort:
         gain = np.maximum(np.sign(toward) * (velocity - self._recent[0])
                           - self.sensing.difference, 0.0) * self.horizon / (lag * self.dt)
         held = np.abs(velocity) + gain < needed
-        if held.any():
+        if grow and held.any():
             grown = self.force + np.where(held, self.rate * self.dt * toward, 0.0)
             size = float(np.linalg.norm(grown))
             self.force = grown if size <= self.limit else grown * (self.limit / size)
