@@ -124,14 +124,8 @@ class HeldShort:
         """N/s: the growth of the force while the robot is held (the limit in one horizon)."""
         return self.limit / self.horizon if math.isfinite(self.limit) else 0.0
 
-    def start_leg(self, x0_bar: Array, retry: bool, explained: Array | None = None) -> None:
-        """A new leg from x̄0; ``retry``: the last leg ran its horizon (short of its window).
-
-        ``explained``: N per axis, the hold the data explain (the observer's friction level,
-        its lower confidence bound; zero where it has identified none): toward a new
-        waypoint (not a retry) the carried force keeps at most that much per axis. None:
-        nothing is known, the whole part toward the new waypoint is carried.
-        """
+    def start_leg(self, x0_bar: Array, retry: bool) -> None:
+        """A new leg from x̄0; ``retry``: the last leg ran its horizon (short of its window)."""
         x0_bar = np.asarray(x0_bar, dtype=float)
         self.window = self.rho * float(np.linalg.norm(x0_bar))
         self._recent.clear()
@@ -141,15 +135,11 @@ class HeldShort:
         offset = x0_bar[:self.m]
         distance = float(np.linalg.norm(offset))
         along = float(self.force @ (-offset / distance)) if distance > 0.0 else 0.0
-        if (self.active or retry) and along > 0.0:
-            carried = along * (-offset / distance)
-            if not retry and explained is not None:
-                bound = np.abs(np.asarray(explained, dtype=float))
-                carried = np.clip(carried, -bound, bound)
-            self.force = np.asarray(carried, dtype=float)
+        if retry and along > 0.0:
+            self.force = along * (-offset / distance)
         else:
             self.force = np.zeros(self.m)
-        self.active = retry or (self.active and bool(np.any(self.force != 0.0)))
+        self.active = retry or self.active
 
     def drop(self) -> None:
         """The brake acts (or the leg's policy was reverted): no integral force, until a retry."""

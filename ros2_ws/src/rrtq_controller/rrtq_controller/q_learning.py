@@ -236,11 +236,7 @@ class QLearningController(PolicyIteration):
         # a leg the keep-off acted on was held by the safety shell, not short: it arms nothing
         armed = retry and not self._braking and not self._kept_in_leg
         self._kept_in_leg = False
-        explained = None
-        if self.observer is not None:
-            level = self.observer.friction()
-            explained = np.zeros(self.m) if level is None else level
-        self._held_short.start_leg(np.asarray(x0_bar, dtype=float), armed, explained)
+        self._held_short.start_leg(np.asarray(x0_bar, dtype=float), armed)
         if armed and self._held_short.active:
             self._events.append((PolicyEvent.HELD_SHORT,
                                  'the last leg ran its horizon short of its window: integral '
