@@ -50,27 +50,30 @@ Two rules keep it from doing harm where the hold is gone or changes with the dir
   that overshot as it held it short; a force still pushing on would have to unwind
   through twice the friction first: at μ = 0.3 the robot hunted ±1 m around its goal at
   ±150 N);
-* toward another waypoint (the leg's window entered, or a new plan) only the part of the
-  force that points at the new waypoint is carried, and integral action stays armed while
-  that part is not zero (friction holds the robot at every waypoint: at μ = 0.1, seed 0 of
-  ``mujoco_friction.yaml``, a mission that waited a horizon at each was not at its goal in
-  300 s; with the carry it reached it at 170 s). Carrying it only along the axes on which
-  the robot starts the new leg slower than it needs (08ea4ec) mended what the carry costs
-  under noise (a force grown once, carried from leg to leg with nothing to unwind it: last
-  ten 1.185 on a noisy, delayed, white-push mission, 1.072 on the rover under white
-  1.0 m/s²; 1.010 with it) but halved the goals at μ = 0.3 (5/10 against 20/20) and slowed
-  μ = 0.1 (237 s against 149 s): a robot friction lets go of reaches its next leg moving,
-  and waits a horizon there. Reverted; integral action is opt-in, for friction.
+* toward another waypoint (the leg's window entered, or a new plan) the force starts
+  from zero, and integral action stays armed: the force grows again wherever the robot is
+  held there, at the rate above (39 N of friction in 0.4 s on the MuJoCo base). Carrying
+  the force on instead (its part toward the new waypoint, 6e0d3f6) is faster under
+  friction (MuJoCo μ = 0.1, 10 seeds: median 149 s to the goal, against 254 s) but carries
+  a force grown once (noise made a speeding robot look held, or the zero gain before a
+  model) from leg to leg with nothing to unwind it: last ten 1.185 on a noisy, delayed,
+  white-push mission, 1.072 on the rover under white 1.0 m/s². Carrying only along the
+  axes the robot starts the new leg held on, and disarming otherwise (08ea4ec), mended
+  that but halved the goals at μ = 0.3: a robot friction lets go of reaches its next leg
+  moving, carries nothing and waits a horizon there. A retry toward the same waypoint
+  keeps what it has.
 
-The safety brake and a revert drop the force and disarm it. Opt-in
-(``controller.integral_action``). It was made so when, at μ = 0.3, it set free robots whose
-learned policy was anti-damping and two of twenty hit an obstacle (a defect of learning
-against friction, fixed since: docs/observer.md §3). It stays so: on by default it costs
-leg cost under noise through the carry (above), and with the carry rule that mended that it
-touched an obstacle once (odometry noise, a 2-step delay and the 0.1 Hz sinusoid, seed 3 of
-``robot_side``, 0.9 mm deep, 0.3 s after it armed on a leg the keep-off had held along an
-obstacle's face: the keep-off pushing 60 N off it, 21 N with the integral force). Integral
-action does not yet know that a robot the safety shell holds is not held short.
+A robot the safety shell holds is not held short: while a keep-off pushes (it pushed on
+the last step) the force does not grow, and a leg on which a keep-off pushed arms nothing
+when it runs its horizon. Without that, a robot held in an obstacle's keep-off zone short
+of a waypoint past its face armed integral action each horizon and grew it to the
+actuator's limit against the keep-off (``test_held_short``), and on ``robot_side``'s
+noisy, delayed sinusoid (seed 3) the robot touched an obstacle, 0.9 mm deep, 0.3 s after
+integral action armed on such a leg.
+
+The safety brake and a revert drop the force and disarm it. On by default
+(``controller.integral_action``); the history and the measurements are in
+docs/features.md (issue 32).
 
 Beyond the papers, like the guard. The Bellman rows take the force applied, this part
 included, so the critic stays consistent (as with the keep-off and the saturation).
