@@ -210,8 +210,9 @@ class KeepOff:
       proportional to a below the speed odometry noise can show (:meth:`Sensing.rest`: no
       full push at sensor noise; with exact odometry any approach is answered in full:
       a robot creeping in at 0.02 m/s under a steady push once touched an obstacle), and in
-      full, at twice the force, where the mean approach speed over the steps since the
-      last change shows a creep that single speeds cannot (:meth:`_creeping`);
+      full, at twice the force, where the mean approach speed over the steps in the zone
+      (since it entered, or since the last creep found) shows a creep that single speeds
+      cannot (:meth:`_creeping`);
     * ahead of the zone, within ``lead`` seconds of it at the approach speed (from
       ``zone`` out to ``zone`` + ``lead`` a), it looks ahead, as Nav2's collision monitor
       does with its time before collision, when the robot heads at the obstacle (within
@@ -351,8 +352,8 @@ class KeepOff:
         not call steady (a sinusoid) presses in at a few cm/s is answered by a fraction of
         the push (robot_side's noisy, delayed 0.1 Hz sinusoid, seed 3: 0.25 m to contact in
         3.4 s at 0.05-0.08 m/s under a push of 20-60 N, then 0.001 m deep). The mean of the
-        approach speeds since the last change of the force, over at most ``lead`` (k
-        steps, more than the actuation lag; the noise is independent per step, σ_v / √k on
+        approach speeds in the zone since it was entered or the last creep found, over at
+        most ``lead`` (k steps, more than the actuation lag; the noise is independent per step, σ_v / √k on
         the mean) shows such a creep: it is called at the false-alarm rate, and then the
         push goes on in full, at twice the force, for the next ``lead``, and the speeds are
         judged afresh. With exact odometry every approach is answered in full already: no
