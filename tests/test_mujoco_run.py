@@ -259,10 +259,11 @@ def test_closed_loop_on_the_frictionless_physics_plant_is_the_rovers_run(tmp_pat
 def test_with_integral_action_the_robot_reaches_its_goal_against_coulomb_friction(tmp_path):
     """The same mission at μ = 0.1 (39 N per axis on the 40 kg base), from the controller's
     defaults but for the opt-in integral action: the zero initial gain and its 20 N of
-    probing never break the friction, and a state feedback stops wherever K x̄ no longer exceeds it (without integral action not at
-    the goal in 200 s, measured). The retried leg's integral action takes the robot there:
-    goal, no physical contact, no command beyond the 1000 N limit (read from the recording
-    with mcap-ros2-support's decoder), and the guard's held_short in /controller/state."""
+    probing never break the friction, and a state feedback stops wherever K x̄ no longer
+    exceeds it (without integral action not at the goal in 200 s, measured). The retried
+    leg's integral action takes the robot there: goal, no physical contact, no command
+    beyond the 1000 N limit (read from the recording with mcap-ros2-support's decoder), and
+    the guard's held_short in /controller/state."""
     import json
     import subprocess
 

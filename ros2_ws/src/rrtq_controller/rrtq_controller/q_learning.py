@@ -134,6 +134,10 @@ class QLearningController(PolicyIteration):
                                      c.force_limit if c.integral_action else math.inf,
                                      sensing=self.sensing)
         """Integral action on a leg retried toward the waypoint the last one ran out on."""
+        self._kept = False
+        """Whether a keep-off pushed on the last step (integral action does not grow then)."""
+        self._kept_in_leg = False
+        """Whether a keep-off pushed in this leg (its running out arms no integral action)."""
         self._braking = False
         """Whether the robot is being braked (a HOLD with ``safe_hold: brake``, or a leg that
         left its line): until the robot is at rest, at most T, and then only on a policy
@@ -229,7 +233,9 @@ class QLearningController(PolicyIteration):
                           None if moved is None else np.asarray(moved, dtype=float))
         self._held = False   # a brake goes on (:meth:`step`)
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
-        armed = retry and not self._braking
+        # a leg the keep-off acted on was held by the safety shell, not short: it arms nothing
+        armed = retry and not self._braking and not self._kept_in_leg
+        self._kept_in_leg = False
         self._held_short.start_leg(np.asarray(x0_bar, dtype=float), armed)
         if armed and self._held_short.active:
             self._events.append((PolicyEvent.HELD_SHORT,
@@ -354,7 +360,7 @@ class QLearningController(PolicyIteration):
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
             u = self._policy_u(phi, x) + noise + feedforward
-            held = self._held_short(x)
+            held = self._held_short(x, grow=not self._kept)
             friction = self._friction_force(u + held, x)
             u = np.clip(u + _overcome(held, friction), -limit, limit)
         velocity = x[2:2 + self.m]
@@ -366,6 +372,8 @@ class QLearningController(PolicyIteration):
                                  self._steady + feedforward), -limit, limit)
             else:
                 keep.release()
+        self._kept = bool(np.any(self._keep_off.push != 0.0) or np.any(self._keep_ahead.push != 0.0))
+        self._kept_in_leg = self._kept_in_leg or self._kept
         if self.robust:
             d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.leg_index
             self._noise_d = self._probing_d.sample(d_std)
