@@ -134,8 +134,6 @@ class QLearningController(PolicyIteration):
                                      c.force_limit if c.integral_action else math.inf,
                                      sensing=self.sensing)
         """Integral action on a leg retried toward the waypoint the last one ran out on."""
-        self._kept = False
-        """Whether a keep-off pushed on the last step (integral action does not grow then)."""
         self._kept_in_leg = False
         """Whether a keep-off pushed in this leg (its running out arms no integral action)."""
         self._braking = False
@@ -278,6 +276,11 @@ class QLearningController(PolicyIteration):
         self._completed = (self._Wa.copy(), self._Wd.copy())
         self._adopted_since = self._spared = False
 
+    @property
+    def _keeping_off(self) -> bool:
+        """Whether a keep-off pushed on the last step (integral action does not grow then)."""
+        return self._keep_off.push != 0.0 or self._keep_ahead.push != 0.0
+
     def time_to_go(self, t: float) -> float:
         """τ = T - (t - t_leg), s, clipped at 0."""
         return max(self.config.horizon - (t - self._t0), 0.0)
@@ -360,7 +363,7 @@ class QLearningController(PolicyIteration):
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
             u = self._policy_u(phi, x) + noise + feedforward
-            held = self._held_short(x, grow=not self._kept)
+            held = self._held_short(x, grow=not self._keeping_off)
             friction = self._friction_force(u + held, x)
             u = np.clip(u + _overcome(held, friction), -limit, limit)
         velocity = x[2:2 + self.m]
@@ -372,8 +375,7 @@ class QLearningController(PolicyIteration):
                                  self._steady + feedforward), -limit, limit)
             else:
                 keep.release()
-        self._kept = bool(np.any(self._keep_off.push != 0.0) or np.any(self._keep_ahead.push != 0.0))
-        self._kept_in_leg = self._kept_in_leg or self._kept
+        self._kept_in_leg = self._kept_in_leg or self._keeping_off
         if self.robust:
             d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.leg_index
             self._noise_d = self._probing_d.sample(d_std)

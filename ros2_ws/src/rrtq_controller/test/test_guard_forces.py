@@ -285,7 +285,7 @@ def test_the_keep_off_cancels_a_steady_push_the_observer_found():
 def test_the_keep_off_finds_a_creep_below_the_noise_from_the_mean_approach_speed(push, monkeypatch):
     """A push the observer does not call steady (a sinusoid; robot_side's noisy, delayed
     0.1 Hz row, seed 3, crept 0.25 m in 3.4 s at 0.05-0.08 m/s and touched): the mean of
-    the approach speeds since the last change shows the creep at the false-alarm rate and
+    the approach speeds in the zone shows the creep at the false-alarm rate and
     the keep-off pushes in full, doubling, so the robot stays out for 30 s (5 seeds of
     odometry noise). Judged on single speeds alone the robot touches; a robot the push
     does not press in is not pushed at all."""

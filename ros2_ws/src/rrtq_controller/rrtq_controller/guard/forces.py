@@ -21,6 +21,9 @@ from .policy import FALSE_ALARM
 
 Array = NDArray[np.float64]
 
+Z_FALSE_ALARM = float(norm.ppf(1.0 - FALSE_ALARM))
+"""The one-sided normal quantile at :data:`.policy.FALSE_ALARM`."""
+
 
 @dataclass
 class Sensing:
@@ -55,7 +58,7 @@ class Sensing:
     @property
     def difference(self) -> float:
         """m/s: how much one speed may exceed another by noise alone (at the false-alarm rate)."""
-        return float(norm.ppf(1.0 - FALSE_ALARM)) * math.sqrt(2.0) * self.velocity_std
+        return Z_FALSE_ALARM * math.sqrt(2.0) * self.velocity_std
 
     def rest(self, floor: float) -> float:
         """m/s: the speed below which a robot counts as at rest (a speed noise can make).
@@ -297,7 +300,7 @@ class KeepOff:
         # an approach noise cannot have made is answered in full (with exact odometry, any)
         sense, rest = self.sensing, self.sensing.rest(0.0)
         lag, noise = sense.lag, sense.difference
-        creeping = self._creeping(a) if inside else False
+        creeping = inside and self._creeping(a)
         if not inside:
             self._creep.clear()
             self._full = 0
@@ -333,9 +336,9 @@ class KeepOff:
         if creeping:                               # an approach below the noise, shown over time
             self.force = min(2.0 * self.force, self.limit) if self.force > 0.0 else \
                 min(max(scale(), 1.0), self.limit)
-            self._full = max(int(round(self.lead / self.dt)), self.sensing.lag + 1)
+            self._full = self._creep_steps
             self._creep.clear()
-        if self._full > 0 and inside:
+        if self._full > 0:                         # (zero out of the zone)
             self._full -= 1
             want = max(want, self.force)
         along = float(u @ n)
@@ -353,23 +356,27 @@ class KeepOff:
         the push (robot_side's noisy, delayed 0.1 Hz sinusoid, seed 3: 0.25 m to contact in
         3.4 s at 0.05-0.08 m/s under a push of 20-60 N, then 0.001 m deep). The mean of the
         approach speeds in the zone since it was entered or the last creep found, over at
-        most ``lead`` (k steps, more than the actuation lag; the noise is independent per step, σ_v / √k on
-        the mean) shows such a creep: it is called at the false-alarm rate, and then the
+        most ``lead`` (k steps, more than the actuation lag; the noise is independent per
+        step, σ_v / √k on the mean) shows such a creep: it is called at the false-alarm rate, and then the
         push goes on in full, at twice the force, for the next ``lead``, and the speeds are
         judged afresh. With exact odometry every approach is answered in full already: no
         test.
         """
         sigma = self.sensing.velocity_std
-        steps = max(int(round(self.lead / self.dt)), self.sensing.lag + 1)
         if sigma <= 0.0:
             return False
         self._creep.append(a)
-        while len(self._creep) > steps:
+        while len(self._creep) > self._creep_steps:
             self._creep.popleft()
         if len(self._creep) <= self.sensing.lag:
             return False                           # what the last change did has not shown yet
-        bound = float(norm.ppf(1.0 - FALSE_ALARM)) * sigma / math.sqrt(len(self._creep))
+        bound = Z_FALSE_ALARM * sigma / math.sqrt(len(self._creep))
         return float(np.mean(self._creep)) > bound
+
+    @property
+    def _creep_steps(self) -> int:
+        """Steps of the creep test's window and of the full push it starts (``lead``, > lag)."""
+        return max(int(round(self.lead / self.dt)), self.sensing.lag + 1)
 
     def release(self) -> None:
         """Out of the zone: no push, and the next engagement starts afresh."""
