@@ -357,11 +357,15 @@ class QLearningController(PolicyIteration):
             feedforward = self._canceller.force(self.observer.push_noise(self._canceller.a))
         elif self._forward is not None:
             feedforward = self._forward.force()
+        # ∂u/∂x̄ of this step's force, for the observer: the actor's -K̂(τ) (the brake, the
+        # keep-offs and integral action left out), none along a saturated axis
+        sensitivity = np.zeros((self.m, x.size))
         if self._braking:
             noise = np.zeros(self.m)
             self._held_short.drop()
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
+            sensitivity = self._policy_sensitivity(phi)
             u = self._policy_u(phi, x) + noise + feedforward
             held = self._held_short(x, grow=not self._keeping_off)
             friction = self._friction_force(u + held, x)
@@ -389,7 +393,8 @@ class QLearningController(PolicyIteration):
             # model fitted across a hold took a spring the rover has not (256 N/m), through
             # which it read a 580 N push at rest; the rows still learn from the step
             fits = not (self._braking and self.config.cancels_push)
-            self._step_id = self.observer.record(x, u, self._segment, fits)
+            sensitivity[np.abs(u) >= limit] = 0.0
+            self._step_id = self.observer.record(x, u, self._segment, fits, sensitivity)
         events, self._events = self._events, []
         self.info = StepInfo(tau=tau, e_c1=e_c1, e_c2=e_c2, e_a=e_a, e_d=e_d, probing=noise,
                              keep_off=self._keep_off.push + self._keep_ahead.push,

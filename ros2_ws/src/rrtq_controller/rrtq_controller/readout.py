@@ -149,6 +149,10 @@ class WeightReadout:
     def _policy_u(self, phi: Array, x: Array) -> Array:
         return self._Wa.T @ _features(phi, x)
 
+    def _policy_sensitivity(self, phi: Array) -> Array:
+        """∂u/∂x̄ (m x n) of the actor's force at the time basis value φ(τ): -K̂(τ)."""
+        return np.einsum('l,lim->mi', phi, self._Wa.reshape(phi.size, self.n, self.m))
+
     def _policy_d(self, phi: Array, x: Array) -> Array:
         return self._Wd.T @ _features(phi, x)
 
