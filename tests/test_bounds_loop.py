@@ -68,7 +68,11 @@ def test_a_robot_pushed_toward_a_wall_reaches_its_goal_with_its_disc_inside_the_
         margins = [(m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec, m.margin)
                    for _, _, _, m in make_reader(f, decoder_factories=[DecoderFactory()])
                    .iter_decoded_messages(topics=['/obstacles/augmented'])]
-    assert len(run.plans) > 2 and max(m for _, m in margins) > 1.0
+    # the margin grew with the deviation (from 0, the running max of nothing) to more than
+    # half the route's 1 m from the wall, so the plans' clearance below binds (1.39 m while
+    # the observer's Coulomb test still called friction on this frictionless rover under
+    # the gust, 0.95 m since: the robot deviates less)
+    assert len(run.plans) > 2 and max(m for _, m in margins) > 0.5
     for t, waypoints in run.plans:
         margin = [m for s, m in margins if s <= t][-1]
         assert np.all(np.abs(waypoints[:-1]) <= 10.0 - margin + 1e-9), (t, margin)
