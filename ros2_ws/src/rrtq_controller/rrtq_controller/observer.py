@@ -55,6 +55,8 @@ RIDGE = 1e-9
 """The ridge of :meth:`Observer.identify`, per standardised unit and transition."""
 GAMMA_FALSE_ALARM = 0.01
 """Two-sided rate at which Γ's error exceeds :attr:`OneStepModel.gamma_error`'s allowance."""
+_Z_ONE_SIDED = float(norm.ppf(1.0 - GAMMA_FALSE_ALARM))
+"""The one-sided normal quantile at :data:`GAMMA_FALSE_ALARM` (the friction level's bounds)."""
 AR_ITERATIONS = 4
 """Cochrane-Orcutt iterations of :meth:`Observer.identify`, from zero AR coefficients or,
 with ``reads_pushes``, from the last model's. Where the forces are a feedback of the state
@@ -377,8 +379,8 @@ class Observer:
         model = self.model
         if model is None or model.friction_level is None or model.friction_error is None:
             return None
-        z = float(norm.ppf(1.0 - GAMMA_FALSE_ALARM))
-        return np.asarray(np.maximum(model.friction_level - z * model.friction_error, 0.0),
+        return np.asarray(np.maximum(model.friction_level - _Z_ONE_SIDED * model.friction_error,
+                                     0.0),
                           dtype=float)
 
     def rest(self) -> Array:
@@ -401,19 +403,21 @@ class Observer:
         depends on an earlier estimate; the states are smoothed with it, and on the smoothed
         states its Φ and Γ_j are kept and the AR part fitted to what they leave (on measured
         states an AR filter close to a difference would amplify the noise it should not see).
-        Refitting Φ and Γ on the smoothed states, as before, biased Γ by 20-70 % upward (the
-        smoother's errors are not white and the forces followed the noise), against 0-13 %
-        corrected (a rover, σ_v = 0.05 m/s fed back, a 2-step delay). Where the smoothed
+        Refitting Φ and Γ on the smoothed states, as before, biased Γ upward (the smoother's
+        errors are not white and the forces followed the noise): 17-37 % with 10 N of
+        probing and 70-200 % with 4 N, against 0-9 % and 0-24 % corrected (a PD-held rover,
+        σ_v = 0.05 m/s fed back, a 2-step delay; ``test_observer.py``). Where the smoothed
         states show Coulomb friction (:meth:`_coulomb`) the refit with its columns is kept
-        instead: friction's own bias on Φ, Γ is the larger. The states are smoothed again
-        with the model kept. Returns whether there is a model.
+        instead (friction's own bias on Φ, Γ is the larger) and the states are smoothed
+        again with it; otherwise the model kept has the same Φ and Γ_j, and the states
+        smoothed with them stand. Returns whether there is a model.
         """
         y, u, segment, first = self._ordered()
         if len(y) < self.lags + self.ar + 2:
             return self.model is not None
-        fits = self._fits[(np.arange(len(y)) + first) % self.memory]
-        noise = ((self.variance, self._sensitivity[(np.arange(len(y)) + first) % self.memory])
-                 if self.noisy else None)
+        kept = (np.arange(len(y)) + first) % self.memory
+        fits = self._fits[kept]
+        noise = (self.variance, self._sensitivity[kept]) if self.noisy else None
         model = self.identify(y, u, segment, ar=0 if self.noisy else None, fits=fits,
                               noise=noise)
         if model is None or not _invertible(model.gamma):
@@ -425,12 +429,12 @@ class Observer:
             if (refined is not None and refined.friction is not None
                     and _invertible(refined.gamma)):
                 model = refined
-            else:
+                smoothed = self._smooth(model, self._process_noise(model, y, u, segment), y, u,
+                                        segment)
+            else:   # the same Φ, Γ_j: the states smoothed with them stand
                 model = self.identify(smoothed, u, segment, fits=fits, weights=model) or model
         self.model = model
-        self._smoothed = (self._smooth(model, self._process_noise(model, y, u, segment), y, u,
-                                       segment)
-                          if self.noisy else y.copy())
+        self._smoothed = smoothed if self.noisy else y.copy()
         # the force that acted over each step, as the model sees it: Γ⁺ Σ_j Γ_j u_{k-j}
         self._acted = np.asarray(np.linalg.lstsq(model.gamma, model.forced(u).T, rcond=None)[0].T,
                                  dtype=float)
@@ -736,9 +740,7 @@ def _with_the_p_before(ok: NDArray[np.bool_], p: int) -> NDArray[np.bool_]:
 
 
 def _largest_force(lagged: Array, m: int) -> Array:
-    """N per input: the largest force of any lag in rows of :func:`_lagged` forces."""
-    if not len(lagged):
-        return np.zeros(m)
+    """N per input: the largest force of any lag in (some) rows of :func:`_lagged` forces."""
     return np.asarray(np.abs(lagged).max(axis=0).reshape(-1, m).max(axis=0), dtype=float)
 
 
@@ -752,7 +754,7 @@ def _friction_like(level: Array, error: Array, largest: Array) -> bool:
     it was fitted on, which moved the robot (a friction beyond every force is a collinear
     column, not one the robot moved against).
     """
-    z = float(norm.ppf(1.0 - GAMMA_FALSE_ALARM))
+    z = _Z_ONE_SIDED
     return bool(np.all(level + z * error >= 0.0) and np.any(level - z * error > 0.0)
                 and np.all(level <= largest))
 
@@ -847,8 +849,9 @@ def _noise_bias(variance: Array, sensitivity: Array, width: int) -> Array:
     least squares on ZᵀZ - A Eᵀ is consistent (corrected least squares, Fuller 1987, ch. 2;
     the feedback term because a state feedback of noisy odometry moves the force with the
     noise). Plain least squares attenuates Φ toward 0 and biases Γ: on a rover with
-    σ_v = 0.05 m/s fed back through a 2-step delay, Φ_vv 0.88-0.91 against 0.945, Γ 0.9-1.4
-    of the plant's; corrected 0.940-0.950 and within 5 % (``test_observer.py``).
+    σ_v = 0.05 m/s fed back through a time-varying gain and a 2-step delay, 4 N of probing,
+    Φ_vv 0.88-0.91 against 0.945 and Γ 0.89-1.36 of the plant's; corrected, Φ_vv
+    0.940-0.950 and Γ 0.89-1.06 (``test_observer.py`` checks it on a PD-held rover).
     """
     n = len(variance)
     m = sensitivity.shape[1] if sensitivity.ndim == 3 else 0
