@@ -260,7 +260,7 @@ class Observer:
             a = _ar_coefficients(target - regress @ w, usable, p) if p else np.zeros(0)
         elif noise is not None:
             bias = _noise_bias(noise[0], noise[1][:-1][usable], regress.shape[1])
-            w = _least_squares(regress[usable], target[usable], bias)
+            w = _least_squares(regress[usable], target[usable], bias, n)
             a = np.zeros(0)
         else:
             candidates = [_cochrane_orcutt(regress, target, usable, p, a) for a in starts]
@@ -817,22 +817,22 @@ def _ridge_inverse(regress: Array) -> tuple[Array, float]:
     return inverse, float(ridge / (max(eig.min(), 0.0) + ridge))
 
 
-def _least_squares(regress: Array, target: Array, bias: Array | None = None) -> Array:
+def _least_squares(regress: Array, target: Array, bias: Array | None = None,
+                   states: int = 0) -> Array:
     """W of target ≈ regress W, columns standardised, a ridge of 1e-9 per standardised unit.
 
     ``bias`` (p x p): what noise in the regressors adds to ZᵀZ in expectation
-    (:func:`_noise_bias`), taken off where what is left of the states' block stays
-    positive definite (where the states' noise is not larger than their motion: there the
-    data cannot say more than the plain fit).
+    (:func:`_noise_bias`), taken off where what is left of the states' block (the first
+    ``states`` columns) stays positive definite (where the states' noise is not larger
+    than their motion: there the data cannot say more than the plain fit).
     """
     scale = np.sqrt(np.mean(regress ** 2, axis=0)) + 1e-300
     z = regress / scale
     gram = z.T @ z
     if bias is not None:
         corrected = gram - bias / np.outer(scale, scale)
-        width = int(np.count_nonzero(np.any(bias != 0.0, axis=0)))
-        block = corrected[:width, :width]
-        if width and np.all(np.linalg.eigvalsh(0.5 * (block + block.T)) > 0.0):
+        block = corrected[:states, :states]
+        if states and np.all(np.linalg.eigvalsh(0.5 * (block + block.T)) > 0.0):
             gram = corrected
     w = np.linalg.solve(gram + RIDGE * len(z) * np.eye(len(gram)), z.T @ target)
     return np.asarray(w / scale[:, None], dtype=float)

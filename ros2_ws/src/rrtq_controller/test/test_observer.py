@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pytest
 
+from rrtq_controller import observer as observer_module
 from rrtq_controller.observer import Observer
 from rrtq_testing import controller_reference as ref
 
@@ -139,6 +140,33 @@ def test_odometry_noise_fed_back_does_not_bias_the_model(seed):
     assert plain is not None
     off = np.abs(np.diag(plain.gamma[2:]) / np.diag(Gam[2:]) - 1.0)
     assert np.max(off) > 0.10 or np.max(np.abs(np.diag(plain.phi)[2:] - np.diag(Phi)[2:])) > 0.01
+
+
+def test_the_noise_correction_is_dropped_where_the_velocity_noise_exceeds_the_motion():
+    """Exact positions, velocities that spread less than the noise they are said to carry
+    (0.045 m/s against σ_v = 0.05 m/s: a robot that barely moves, sampled): what is left
+    of ZᵀZ's states' block after the correction is not positive definite, so
+    the plain fit stands. The check is on the whole states' block: counting the columns
+    the correction touches took the positions' block (no noise, always definite) and
+    applied the correction."""
+    rng = np.random.default_rng(0)
+    k = 2000
+    positions = rng.normal(0.0, 3.0, (k, 2))
+    velocities = rng.normal(0.0, 0.045, (k, 2))
+    forces = rng.normal(0.0, 10.0, (k, 2))
+    regress = np.hstack([positions, velocities, forces, np.ones((k, 1))])
+    target = regress[:, :4] * 0.9 + rng.normal(0.0, 0.01, (k, 4))
+    variance = np.array([0.0, 0.0, 0.05 ** 2, 0.05 ** 2])
+    bias = observer_module._noise_bias(variance, np.zeros((k, 2, 4)), regress.shape[1])
+    plain = observer_module._least_squares(regress, target)
+    np.testing.assert_array_equal(
+        observer_module._least_squares(regress, target, bias, 4), plain)
+    # with more motion than noise the correction is applied
+    moving = regress.copy()
+    moving[:, 2:4] = rng.normal(0.0, 0.5, (k, 2))
+    bias = observer_module._noise_bias(variance, np.zeros((k, 2, 4)), moving.shape[1])
+    assert not np.array_equal(observer_module._least_squares(moving, target, bias, 4),
+                              observer_module._least_squares(moving, target))
 
 
 def test_smoothing_brings_noisy_odometry_closer_to_the_truth():
