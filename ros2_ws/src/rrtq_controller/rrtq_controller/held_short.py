@@ -92,6 +92,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .guard import Sensing
+from .guard.forces import Z_FALSE_ALARM
 
 Array = NDArray[np.float64]
 
@@ -153,7 +154,7 @@ class HeldShort:
         self.active = False
         self._recent.clear()
 
-    def __call__(self, x_bar: Array, grow: bool = True) -> Array:
+    def __call__(self, x_bar: Array, grow: bool = True, time_left: float | None = None) -> Array:
         """N (m,): the integral force for this step at state x̄.
 
         ``grow`` false: something else holds the robot this step (the safety shell's
@@ -171,7 +172,8 @@ class HeldShort:
         if away < 0.0:                 # past the target: no force away from it (no hunting)
             self.force = self.force - away * toward
         velocity = x[self.m:2 * self.m] if x.size >= 2 * self.m else np.zeros(self.m)
-        needed = (distance - self.window) / self.horizon * np.abs(toward)
+        left = self.horizon if time_left is None else max(time_left, self.dt)
+        needed = (distance - self.window) / left * np.abs(toward)
         self._recent.append(velocity.copy())
         lag = self.sensing.lag
         while len(self._recent) > lag + 1:
@@ -181,7 +183,7 @@ class HeldShort:
         # m/s per axis: what the speed toward the target gains in a horizon at its present rate
         gain = np.maximum(np.sign(toward) * (velocity - self._recent[0])
                           - self.sensing.difference, 0.0) * self.horizon / (lag * self.dt)
-        held = np.abs(velocity) + gain < needed
+        held = np.abs(velocity) + gain + Z_FALSE_ALARM * self.sensing.velocity_std < needed
         if grow and held.any():
             grown = self.force + np.where(held, self.rate * self.dt * toward, 0.0)
             size = float(np.linalg.norm(grown))

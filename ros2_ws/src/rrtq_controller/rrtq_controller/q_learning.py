@@ -367,7 +367,7 @@ class QLearningController(PolicyIteration):
         else:
             sensitivity = self._policy_sensitivity(phi)
             u = self._policy_u(phi, x) + noise + feedforward
-            held = self._held_short(x, grow=not self._keeping_off)
+            held = self._held_short(x, grow=not self._keeping_off, time_left=tau)
             friction = self._friction_force(u + held, x)
             u = np.clip(u + _overcome(held, friction), -limit, limit)
         velocity = x[2:2 + self.m]
