@@ -256,12 +256,12 @@ def test_closed_loop_on_the_frictionless_physics_plant_is_the_rovers_run(tmp_pat
     assert mj['min_clearance_m'] == pytest.approx(rover['min_clearance_m'], abs=1e-3)
 
 
-def test_with_integral_action_the_robot_reaches_its_goal_against_coulomb_friction(tmp_path):
+def test_from_the_defaults_the_robot_reaches_its_goal_against_coulomb_friction(tmp_path):
     """The same mission at μ = 0.1 (39 N per axis on the 40 kg base), from the controller's
-    defaults but for the opt-in integral action: the zero initial gain and its 20 N of
-    probing never break the friction, and a state feedback stops wherever K x̄ no longer
-    exceeds it (without integral action not at the goal in 200 s, measured). The retried
-    leg's integral action takes the robot there: goal, no physical contact, no command
+    defaults: the zero initial gain and its 20 N of probing never break the friction, and a
+    state feedback stops wherever K x̄ no longer exceeds it (with
+    ``controller.integral_action: false`` not at the goal in 200 s, measured). The retried
+    leg's integral action (on by default) takes the robot there: goal, no physical contact, no command
     beyond the 1000 N limit (read from the recording with mcap-ros2-support's decoder), and
     the guard's held_short in /controller/state."""
     import json
@@ -270,8 +270,7 @@ def test_with_integral_action_the_robot_reaches_its_goal_against_coulomb_frictio
     from mcap_ros2.reader import read_ros2_messages
     path = tmp_path / 'friction.yaml'
     path.write_text(LOOP.replace('PLANT', '{model: mujoco, mass: 40.0, damping: 45.0, '
-                                 'friction: 0.1}').replace('duration: 90.0', 'duration: 150.0')
-                    + 'controller: {integral_action: true}\n')
+                                 'friction: 0.1}').replace('duration: 90.0', 'duration: 150.0'))
     out = tmp_path / 'run'
     proc = subprocess.run([str(ROOT / 'scripts/rrtq'), 'run', str(path), '--out', str(out),
                            '--mode', 'composed'], capture_output=True, text=True, timeout=600)

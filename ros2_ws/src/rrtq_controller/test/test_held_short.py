@@ -202,6 +202,48 @@ def test_under_odometry_noise_a_robot_at_rest_is_still_held_and_the_force_grows(
     assert force[0] > 0.9 * 100 * LIMIT / T * DT
 
 
+def test_under_odometry_noise_a_robot_moving_as_fast_as_it_needs_is_not_held():
+    """σ_v = 0.05 m/s, the robot moving toward its target at the speed that reaches the
+    window in the time left: an axis counts as held only where its speed falls short by
+    more than noise explains (one-sided, 1 %: about 1 of its 100 steps; more than 5 has
+    probability 5e-4). Read as exact, a third of its steps count as held and the force
+    grows on them (the leg cost the noisy robot side paid: last ten 1.99 on a seed that
+    flies 1.00 with the allowance)."""
+    def grown_steps(sensing: Sensing) -> int:
+        rng = np.random.default_rng(1)
+        held = HeldShort(2, RHO, T, DT, LIMIT, sensing=sensing)
+        held.start_leg(np.array([-5.0, 0.0, 0.0, 0.0]), retry=True)
+        grew, before, position = 0, 0.0, -5.0
+        for k in range(100):
+            needed = (abs(position) - held.window) / (T - k * DT)
+            x = np.array([position, 0.0, needed + rng.normal(0.0, 0.05), rng.normal(0.0, 0.05)])
+            force = held(x, time_left=T - k * DT)
+            grew += force[0] > before
+            before = force[0]
+            position += needed * DT
+        return grew
+
+    assert grown_steps(Sensing(velocity_std=0.05)) <= 5
+    assert grown_steps(Sensing()) >= 30        # the same noise, read as exact: held
+
+
+def test_the_needed_speed_is_the_one_that_reaches_the_window_in_the_time_left():
+    """A robot that would reach the window in one more horizon is not held at the leg's
+    start, and is held with a tenth of the horizon left (a speed that only enters the
+    window after the horizon: each leg ran its horizon, and every retry's window was
+    smaller, on the MuJoCo plant with friction)."""
+    held = HeldShort(2, RHO, T, DT, LIMIT)
+    held.start_leg(np.array([-5.0, 0.0, 0.0, 0.0]), retry=True)
+    speed = (5.0 - held.window) / T * 1.05
+    x = np.array([-5.0, 0.0, speed, 0.0])
+    for _ in range(5):
+        force = held(x, time_left=T)
+    assert force[0] == 0.0
+    for _ in range(5):
+        force = held(x, time_left=0.1 * T)
+    assert force[0] > 0.0
+
+
 def _walk(integral_action: bool, seconds: float = 60.0):
     """The driver on the rover under a 28 N push against its first leg (as the field
     bump's), its actor held at the Riccati gain: the waypoints it reached, the largest
