@@ -136,6 +136,8 @@ class QLearningController(PolicyIteration):
         """Integral action on a leg retried toward the waypoint the last one ran out on."""
         self._kept_in_leg = False
         """Whether a keep-off pushed in this leg (its running out arms no integral action)."""
+        self._leg_last: Array | None = None
+        """The velocity at the current leg's last step so far."""
         self._braking = False
         """Whether the robot is being braked (a HOLD with ``safe_hold: brake``, or a leg that
         left its line): until the robot is at rest, at most T, and then only on a policy
@@ -232,13 +234,28 @@ class QLearningController(PolicyIteration):
         self._held = False   # a brake goes on (:meth:`step`)
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
         # a leg the keep-off acted on was held by the safety shell, not short: it arms nothing
-        armed = retry and not self._braking and not self._kept_in_leg
+        # and before any policy completed a leg, a robot still moving at the end of its leg
+        # was not held: the initial policy's probing walks it about (integral action would
+        # take over from a learner that has not started); friction or a push holds it still
+        armed = (retry and not self._braking and not self._kept_in_leg
+                 and (self._completed is not None or self._at_rest_at_last_leg_end()))
         self._kept_in_leg = False
+        self._leg_last = None
         self._held_short.start_leg(np.asarray(x0_bar, dtype=float), armed)
         if armed and self._held_short.active:
             self._events.append((PolicyEvent.HELD_SHORT,
                                  'the last leg ran its horizon short of its window: integral '
                                  'action'))
+
+    def _at_rest_at_last_leg_end(self) -> bool:
+        """Whether the robot ended the last leg at rest.
+
+        Its speed at most the brake's rest speed or, under odometry noise, what a robot at
+        rest shows with probability :data:`FALSE_ALARM` (:meth:`guard.Sensing.rest`).
+        """
+        if self._leg_last is None:
+            return True
+        return float(np.linalg.norm(self._leg_last)) <= self.sensing.rest(self._brake.rest_speed)
 
     def renew_horizon(self, x0_bar: Array, t: float) -> None:
         """Keep station on a reached target with a fresh horizon from time t (s).
@@ -380,6 +397,7 @@ class QLearningController(PolicyIteration):
             else:
                 keep.release()
         self._kept_in_leg = self._kept_in_leg or self._keeping_off
+        self._leg_last = x[self.m:2 * self.m].copy()
         if self.robust:
             d_std = self.config.disturbance_probing_std * self.config.probing_decay ** self.leg_index
             self._noise_d = self._probing_d.sample(d_std)
