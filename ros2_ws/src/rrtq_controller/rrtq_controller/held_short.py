@@ -75,9 +75,11 @@ noisy, delayed sinusoid (seed 3) the robot touched an obstacle, 0.9 mm deep, 0.3
 integral action armed on such a leg. Nor is a robot no policy has yet driven through a leg
 (the controller decides, :meth:`rrtq_controller.q_learning.QLearningController.start_leg`):
 before any leg has completed, a leg that ran its horizon arms integral action only where
-the robot ended it at rest (the brake's rest speed, or under odometry noise what a robot
-at rest shows with probability 1 %). The zero gain's probing walks a frictionless robot
-about and its legs run their horizon; armed there, integral action took over from a
+the robot ended it at rest (the mean of its last readings below the brake's rest speed,
+or under odometry noise below what that many readings of a robot at rest show with
+probability 1 %, enough of them to bring that down to the rest speed). The zero gain's
+probing walks a frictionless robot about and its legs run their horizon; armed there,
+integral action took over from a
 learner that had not started (the noisy, delayed robot side, seeds 0 and 10: last ten
 2.347 and 1.778 against 1.008 and 1.023), while friction or a push holds a robot still.
 

@@ -830,9 +830,13 @@ def _least_squares(regress: Array, target: Array, bias: Array | None = None,
     z = regress / scale
     gram = z.T @ z
     if bias is not None:
-        corrected = gram - bias / np.outer(scale, scale)
+        # a column that never moved (scale ~1e-300, whose square underflows to 0) has no
+        # noise to take off: 0 / 0 there, and the correction is left out where it is not finite
+        with np.errstate(all='ignore'):
+            corrected = gram - bias / np.outer(scale, scale)
         block = corrected[:states, :states]
-        if states and np.all(np.linalg.eigvalsh(0.5 * (block + block.T)) > 0.0):
+        if (states and np.all(np.isfinite(corrected))
+                and np.all(np.linalg.eigvalsh(0.5 * (block + block.T)) > 0.0)):
             gram = corrected
     w = np.linalg.solve(gram + RIDGE * len(z) * np.eye(len(gram)), z.T @ target)
     return np.asarray(w / scale[:, None], dtype=float)

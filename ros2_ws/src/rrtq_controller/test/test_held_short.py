@@ -344,17 +344,21 @@ def test_a_robot_the_keep_off_holds_off_an_obstacle_is_not_held_short():
     assert closest > 0.0
 
 
-def _zero_gain_legs(friction: float, seed: int, seconds: float = 35.0):
+def _zero_gain_legs(friction: float, seed: int, seconds: float = 35.0, velocity_std: float = 0.0):
     """The driver from the defaults' zero gain toward a waypoint 5 m off, on the rover with
     Coulomb ``friction`` per axis (N): the held_short events and how often the robot ended
-    a leg moving."""
+    a leg moving. ``velocity_std``: odometry noise on the velocity the driver reads (m/s,
+    per axis; the driver told its variance)."""
     config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, force_limit=LIMIT)
     driver = LearningDriver(config, 4, 2, 0, np.random.default_rng(seed))
+    driver.set_odometry_variance(np.array([0.0, 0.0, velocity_std ** 2, velocity_std ** 2]))
+    noise = np.random.default_rng(1000 + seed)
     x = np.zeros(4)
     driver.set_plan([[5.0, 0.0]], x, 0.0)
     held, moving, target = 0, 0, None
     for k in range(int(seconds / DT)):
-        out = driver.step(k * DT, x)
+        read = x + np.concatenate([np.zeros(2), noise.normal(0.0, velocity_std, 2)])
+        out = driver.step(k * DT, read)
         held += 'held_short' in out.policy_event
         x = _coulomb_step(x, out.u, friction)
         if target is not None and (k + 1) % int(T / DT) == 0:
@@ -374,3 +378,47 @@ def test_the_zero_gains_probing_walk_arms_no_integral_action_and_friction_still_
         assert moving >= 1 and held == 0, (seed, held, moving)
     held, _ = _zero_gain_legs(39.0, 0)
     assert held >= 1
+
+
+def _conveyed_legs(velocity_std: float, seed: int, speed: float = 0.19, seconds: float = 100.0) -> int:
+    """The held_short events of the driver from the defaults' zero gain, on a robot carried
+    toward a waypoint 100 m off at ``speed`` (m/s) whatever it commands, its velocity read
+    with noise σ_v = ``velocity_std``: every leg runs its horizon with the robot moving."""
+    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, force_limit=LIMIT)
+    driver = LearningDriver(config, 4, 2, 0, np.random.default_rng(seed))
+    driver.set_odometry_variance(np.array([0.0, 0.0, velocity_std ** 2, velocity_std ** 2]))
+    noise = np.random.default_rng(1000 + seed)
+    driver.set_plan([[100.0, 0.0]], np.zeros(4), 0.0)
+    held = 0
+    for k in range(int(seconds / DT)):
+        x = np.array([speed * k * DT, 0.0, speed, 0.0])
+        read = x + np.concatenate([np.zeros(2), noise.normal(0.0, velocity_std, 2)])
+        held += 'held_short' in driver.step(k * DT, read).policy_event
+    return held
+
+
+def test_under_odometry_noise_a_robot_moving_at_its_legs_end_arms_nothing_and_friction_still_does():
+    """σ_v = 0.05 m/s: one reading of a robot at rest exceeds 0.15 m/s with probability 1 %
+    (the Rayleigh quantile), but one reading of a robot moving at 0.19 m/s falls below it on
+    about one step in five: at the end of a leg that ran its horizon it armed integral
+    action for a learner that had not started. The mean of the leg's last readings
+    (:meth:`Sensing.samples_for`: 10 at this noise) tells moving from at rest: no arming in
+    ten legs on any of four seeds (one reading: 2-5 armings per seed), and 39 N of
+    friction, which holds the robot still, still arms it."""
+    assert [_conveyed_legs(0.05, seed) for seed in range(4)] == [0, 0, 0, 0]
+    held, _ = _zero_gain_legs(39.0, 0, velocity_std=0.05)
+    assert held >= 1
+
+
+def test_the_readings_a_mean_needs_bring_the_noise_quantile_to_the_rest_speed():
+    """k = (σ_v q / floor)², q the Rayleigh quantile at 1 %: the mean of k readings of a
+    robot at rest exceeds the floor with probability at most 1 % (simulated here), and
+    exact odometry needs one."""
+    sense = Sensing(velocity_std=0.05)
+    k = sense.samples_for(0.05)
+    assert k == math.ceil((0.05 * math.sqrt(2.0 * math.log(100.0)) / 0.05) ** 2)
+    assert sense.rest(0.05, k) == 0.05 and sense.rest(0.05) > 0.15
+    rng = np.random.default_rng(0)
+    means = rng.normal(0.0, 0.05, (20000, k, 2)).mean(axis=1)
+    assert np.mean(np.linalg.norm(means, axis=1) > 0.05) <= 0.01
+    assert Sensing().samples_for(0.05) == 1

@@ -169,6 +169,26 @@ def test_the_noise_correction_is_dropped_where_the_velocity_noise_exceeds_the_mo
                               observer_module._least_squares(moving, target))
 
 
+def test_a_column_that_never_moved_leaves_the_noise_correction_out_instead_of_failing():
+    """A robot carried along x at a constant speed, exact positions, noisy velocities: its y
+    position is exactly 0 on every step, its column's scale ~1e-300, and the correction's
+    0 / 0 there made the states' block NaN (numpy's eigvalsh raised: "Eigenvalues did not
+    converge", the controller's step with it). The fit is finite, the plain one."""
+    rng = np.random.default_rng(0)
+    k = 400
+    x = 0.19 * 0.05 * np.arange(k)
+    positions = np.column_stack([x, np.zeros(k)])
+    velocities = np.column_stack([0.19 + rng.normal(0.0, 0.05, k), rng.normal(0.0, 0.05, k)])
+    forces = rng.normal(0.0, 10.0, (k, 2))
+    regress = np.hstack([positions, velocities, forces, np.ones((k, 1))])
+    target = regress[:, :4] * 0.9 + rng.normal(0.0, 0.01, (k, 4))
+    variance = np.array([0.0, 0.0, 0.05 ** 2, 0.05 ** 2])
+    bias = observer_module._noise_bias(variance, np.zeros((k, 2, 4)), regress.shape[1])
+    fitted = observer_module._least_squares(regress, target, bias, 4)
+    assert np.all(np.isfinite(fitted))
+    np.testing.assert_array_equal(fitted, observer_module._least_squares(regress, target))
+
+
 def test_smoothing_brings_noisy_odometry_closer_to_the_truth():
     """σ_p = 0.02 m, σ_v = 0.05 m/s with a delay: the smoothed states and the equivalent input.
 
