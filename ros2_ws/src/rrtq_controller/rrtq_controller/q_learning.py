@@ -137,6 +137,8 @@ class QLearningController(PolicyIteration):
         """Integral action on a leg retried toward the waypoint the last one ran out on."""
         self._kept_in_leg = False
         """Whether a keep-off pushed in this leg (its running out arms no integral action)."""
+        self._braked_in_leg = False
+        """Whether the brake acted in this leg (its running out arms no integral action)."""
         self._leg_last: deque[Array] = deque()
         """The velocities of the current leg's last steps so far (at most the readings
         whose mean tells rest under the odometry's noise, :meth:`guard.Sensing.samples_for`)."""
@@ -235,13 +237,14 @@ class QLearningController(PolicyIteration):
                           None if moved is None else np.asarray(moved, dtype=float))
         self._held = False   # a brake goes on (:meth:`step`)
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
-        # a leg the keep-off acted on was held by the safety shell, not short: it arms nothing
+        # a leg the keep-off or the brake acted on was held by the safety shell, not short:
+        # it arms nothing
         # and before any policy completed a leg, a robot still moving at the end of its leg
         # was not held: the initial policy's probing walks it about (integral action would
         # take over from a learner that has not started); friction or a push holds it still
-        armed = (retry and not self._braking and not self._kept_in_leg
+        armed = (retry and not self._braking and not self._kept_in_leg and not self._braked_in_leg
                  and (self._completed is not None or self._at_rest_at_last_leg_end()))
-        self._kept_in_leg = False
+        self._kept_in_leg = self._braked_in_leg = False
         self._leg_last.clear()
         self._held_short.start_leg(np.asarray(x0_bar, dtype=float), armed)
         if armed and self._held_short.active:
@@ -406,6 +409,7 @@ class QLearningController(PolicyIteration):
             else:
                 keep.release()
         self._kept_in_leg = self._kept_in_leg or self._keeping_off
+        self._braked_in_leg = self._braked_in_leg or self._braking
         self._leg_last.append(x[self.m:2 * self.m].copy())
         while len(self._leg_last) > self.sensing.samples_for(self._brake.rest_speed):
             self._leg_last.popleft()
