@@ -82,9 +82,9 @@ the robot ended it at rest (the mean of its last readings below the brake's rest
 or under odometry noise below what that many readings of a robot at rest show with
 probability 1 %, enough of them to bring that down to the rest speed). The zero gain's
 probing walks a frictionless robot about and its legs run their horizon; armed there,
-integral action took over from a
-learner that had not started (the noisy, delayed robot side, seeds 0 and 10: last ten
-2.347 and 1.778 against 1.008 and 1.023), while friction or a push holds a robot still.
+integral action took over from a learner that had not started (the noisy, delayed robot
+side, seeds 0 and 10: last ten 2.347 and 1.778 against 1.008 and 1.023), while friction or
+a push holds a robot still.
 
 The safety brake and a revert drop the force and disarm it. On by default
 (``controller.integral_action``). Two earlier forms of the held test were not: with the
