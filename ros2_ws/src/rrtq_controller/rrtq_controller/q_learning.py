@@ -39,6 +39,7 @@ from .held_short import HeldShort
 from .push_feedforward import PushFeedforward
 from .policy_iteration import PolicyIteration
 from .probing import Probing
+from .rollout import fly
 from .readout import _features
 from .stability import gain_warnings
 
@@ -139,6 +140,13 @@ class QLearningController(PolicyIteration):
         """Whether a keep-off pushed in this leg (its running out arms no integral action)."""
         self._braked_in_leg = False
         """Whether the brake acted in this leg (its running out arms no integral action)."""
+        self._leg_x0: Array | None = None
+        """x̄0 of the current leg (or horizon), for :meth:`_short_of_own_policy`."""
+        self._leg_gains: list[Array] = []
+        """The actor's gain K̂(τ) at each step of the current leg so far (its policy as it
+        flew the leg: the actor moves toward each adopted target within a leg)."""
+        self._leg_open: list[Array] = []
+        """N: the open-loop part of each of those steps' force (probing, a feed-forward)."""
         self._leg_last: deque[Array] = deque()
         """The velocities of the current leg's last steps so far (at most the readings
         whose mean tells rest under the odometry's noise, :meth:`guard.Sensing.samples_for`)."""
@@ -209,9 +217,13 @@ class QLearningController(PolicyIteration):
         """
         renew = True   # a fresh divergence reference: first leg, completed leg, a revert
         retry = False  # the last leg ran its horizon short of its window
+        held = False   # and something held it there (see the arming below)
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
             retry = ran_out
+            if ran_out:
+                held = (self._short_of_own_policy() if self._completed is not None
+                        else self._at_rest_at_last_leg_end())
             entered = not ran_out if completed is None else completed
             if entered:
                 self.completed_leg()
@@ -238,19 +250,50 @@ class QLearningController(PolicyIteration):
         self._held = False   # a brake goes on (:meth:`step`)
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
         # a leg the keep-off or the brake acted on was held by the safety shell, not short:
-        # it arms nothing
-        # and before any policy completed a leg, a robot still moving at the end of its leg
-        # was not held: the initial policy's probing walks it about (integral action would
-        # take over from a learner that has not started); friction or a push holds it still
-        armed = (retry and not self._braking and not self._kept_in_leg and not self._braked_in_leg
-                 and (self._completed is not None or self._at_rest_at_last_leg_end()))
+        # it arms nothing. Otherwise a leg that ran out was held where its robot ended
+        # farther from its target than its own policy would have taken it (the policy may
+        # be slow: :meth:`_short_of_own_policy`) or, before any policy completed a leg,
+        # where the robot ended it at rest: the initial policy's probing walks a robot
+        # about, and friction or a push holds it still (integral action armed on a probing
+        # walk would take over from a learner that has not started)
+        armed = (retry and held and not self._braking and not self._kept_in_leg
+                 and not self._braked_in_leg)
         self._kept_in_leg = self._braked_in_leg = False
         self._leg_last.clear()
+        self._leg_x0 = np.array(x0_bar, dtype=float)
+        self._leg_gains.clear()
+        self._leg_open.clear()
         self._held_short.start_leg(np.asarray(x0_bar, dtype=float), armed)
         if armed and self._held_short.active:
-            self._events.append((PolicyEvent.HELD_SHORT,
-                                 'the last leg ran its horizon short of its window: integral '
-                                 'action'))
+            self._note(PolicyEvent.HELD_SHORT,
+                       'the last leg ran its horizon short of its window: integral action')
+
+    def _short_of_own_policy(self) -> bool:
+        """Whether the leg that ran out ended short of where its own policy would have taken it.
+
+        Its start x̄0 flown by the actors' gain K̂(τ) through the observer's identified model
+        (:func:`rollout.fly`: no push, no friction, no noise) to the leg's last step, against
+        where the robot was then: held, when it stood farther from its target, D = ‖x̄‖ as the
+        window counts it, by more than the window ρ D0 -- a shortfall the leg itself would
+        accept is not a hold. A policy slower than the leg's window asks (the finite-horizon
+        optimum of a heavy plant with a dear force, R large, ends its horizon short of its
+        window; ``controller_robustness``) falls short where the model says it does, and
+        nothing is held; a push or friction holds the robot where the model does not. True
+        without a model (nothing to tell them apart by).
+        """
+        if self.observer is None or self.observer.model is None or self._prev is None:
+            return True
+        c = self.config
+        steps = int(round((self._prev_t - self._t0) / c.dt))
+        if steps < 1 or self._leg_x0 is None or len(self._leg_gains) < steps:
+            return True
+        path = fly(self.observer.model, np.array(self._leg_gains[:steps]), self._leg_x0,
+                   np.array(self._leg_open[:steps]), c.force_limit)
+        predicted = float(np.linalg.norm(path[-1]))
+        if not np.isfinite(predicted):
+            return True
+        actual = float(np.linalg.norm(self._prev[1]))
+        return actual - predicted > c.rho * float(np.linalg.norm(self._leg_x0))
 
     def _at_rest_at_last_leg_end(self) -> bool:
         """Whether the robot ended the last leg at rest.
@@ -278,6 +321,9 @@ class QLearningController(PolicyIteration):
         """
         self._t0 = float(t)
         self._prev = None
+        self._leg_x0 = np.array(x0_bar, dtype=float)
+        self._leg_gains.clear()
+        self._leg_open.clear()
         self._segment += 1
         self._watch.start(np.asarray(x0_bar, dtype=float))
         self._probing_u.follow_line(np.asarray(x0_bar, dtype=float))
@@ -395,6 +441,8 @@ class QLearningController(PolicyIteration):
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
             sensitivity = self._policy_sensitivity(phi)
+            self._leg_gains.append(-sensitivity)
+            self._leg_open.append(noise + feedforward)
             u = self._policy_u(phi, x) + noise + feedforward
             held = self._held_short(x, grow=not self._keeping_off, time_left=tau)
             friction = self._friction_force(u + held, x)

@@ -103,6 +103,28 @@ def closed_loop(model: OneStepModel, gains: Array) -> Array:
     return T
 
 
+def fly(model: OneStepModel, gains: Array, x0: Array, inputs: Array | None = None,
+        limit: float = np.inf) -> Array:
+    """The states x̄_1 .. x̄_S of a robot flown from x̄0 through ``model``: (S, n).
+
+    The force at step k is -K̂_k x̄_k (``gains`` (S, m, n)) plus ``inputs[k]`` (the open-loop
+    part of what was applied: probing, a feed-forward; none by default), clipped at ±``limit``;
+    nothing else acts (no push, no noise), and every input lag starts at zero.
+    """
+    n, lags = model.phi.shape[0], model.gammas.shape[0]
+    x = np.asarray(x0, dtype=float).copy()
+    past = np.zeros((lags, model.gammas.shape[2]))    # u_k, u_{k-1}, ..., u_{k-J}
+    out = np.empty((len(gains), n))
+    with np.errstate(over='ignore', invalid='ignore'):
+        for k, K in enumerate(gains):
+            u = -K @ x if inputs is None else inputs[k] - K @ x
+            past = np.roll(past, 1, axis=0)
+            past[0] = np.clip(u, -limit, limit)
+            x = model.phi @ x + np.einsum('jnm,jm->n', model.gammas, past)
+            out[k] = x
+    return out
+
+
 def worst_growth(transitions: Array, positions: int, start: int,
                  states: slice | None = None) -> Array:
     """‖Ψ(start → k)‖ for k = start+1 .. S: the position block, from rest (S - start,).

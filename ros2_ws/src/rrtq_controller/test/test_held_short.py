@@ -12,8 +12,9 @@ from scipy.linalg import solve_continuous_are
 
 from rrtq_controller.config import ControllerConfig
 from rrtq_controller.driver import LearningDriver
-from rrtq_controller.guard import Sensing
+from rrtq_controller.guard import PolicyEvent, Sensing
 from rrtq_controller.held_short import HeldShort
+from rrtq_controller.q_learning import QLearningController
 from rrtq_testing import controller_reference as ref
 
 DT, T, RHO = 0.05, 10.0, 0.15
@@ -425,10 +426,11 @@ def test_the_readings_a_mean_needs_bring_the_noise_quantile_to_the_rest_speed():
 
 
 def _first_leg_then_arming(brake_at: float | None) -> int:
-    """The driver on the rover toward a waypoint 5 m off, its initial policy marked as one
-    that completed a leg (arming then does not wait for the robot to rest), the safety
-    brake put on at ``brake_at`` (s; None: never): the held_short events when the first leg
-    has run its horizon. The line watch is off (the probing walk trips it otherwise)."""
+    """The driver on the rover toward a waypoint 5 m off, held by 39 N of Coulomb friction
+    that its zero gain's probing does not break, the initial policy marked as one that
+    completed a leg (arming then does not wait for the robot to rest), the safety brake put
+    on at ``brake_at`` (s; None: never): the held_short events when the first leg has run
+    its horizon. The line watch is off."""
     config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, force_limit=LIMIT,
                               divergence_deviation=math.inf)
     driver = LearningDriver(config, 4, 2, 0, np.random.default_rng(0))
@@ -441,7 +443,7 @@ def _first_leg_then_arming(brake_at: float | None) -> int:
             driver.controller.revert('a trip of the test', k * DT, brake=True)
         out = driver.step(k * DT, x)
         held += 'held_short' in out.policy_event
-        x = _coulomb_step(x, out.u, 0.0)
+        x = _coulomb_step(x, out.u, 39.0)
     return held
 
 
@@ -453,3 +455,52 @@ def test_a_leg_the_brake_acted_on_arms_no_integral_action():
     the brake arms it."""
     assert _first_leg_then_arming(None) >= 1
     assert _first_leg_then_arming(2.0) == 0
+
+
+def _slow_plant_armings(push: float, legs: int = 10) -> tuple[int, int]:
+    """The controller on a light, lightly damped rover whose force is dear (24 kg, 8 kg/s,
+    R = 2: ``controller_robustness``'s plant 10, whose finite-horizon optimum ends most legs
+    short of their window) from the LQ gain as a policy that completed a leg (so that arming
+    does not wait for a completed leg), the line watch off, over random legs of 2-8 m, a
+    steady ``push`` (N, along x) on it: (held_short events, legs that ran their horizon)."""
+    mass, damping, R = 24.0, 8.0, 2.0
+    A = np.block([[np.zeros((2, 2)), np.eye(2)], [np.zeros((2, 2)), -damping / mass * np.eye(2)]])
+    B = np.vstack([np.zeros((2, 2)), np.eye(2) / mass])
+    plant = ref.Plant(A, B, DT)
+    P = solve_continuous_are(A, B, 10.0 * np.eye(4), R * np.eye(2))
+    config = ControllerConfig(M=10.0, R=R, P_T=0.5, force_limit=640.0,
+                              initial_gain=(B.T @ P / R).tolist(), divergence_deviation=math.inf)
+    ctrl = QLearningController(config, 4, 2, 0, np.random.default_rng(3))
+    ctrl.start_leg(np.zeros(4), 0.0)
+    ctrl.completed_leg()
+    rng = np.random.default_rng(4)
+    t, v, ran_out = 0.0, np.zeros(2), 0
+    for _ in range(legs):
+        angle, length = rng.uniform(0.0, 2.0 * np.pi), rng.uniform(2.0, 8.0)
+        x = np.concatenate([-length * np.array([np.cos(angle), np.sin(angle)]), v])
+        ctrl.start_leg(x, t)
+        d0 = float(np.linalg.norm(x))
+        for k in range(int(round(T / DT))):
+            if np.linalg.norm(x) <= config.rho * d0:
+                break
+            u = np.clip(ctrl.step(t, x), -640.0, 640.0)
+            x = plant.step(x, u + np.array([push, 0.0]))
+            t += DT
+        else:
+            ran_out += 1
+        v = x[2:]
+    return ctrl.event_counts[PolicyEvent.HELD_SHORT], ran_out
+
+
+def test_a_policy_slower_than_its_window_arms_nothing_and_a_push_still_does():
+    """A leg that ran its horizon where its own policy, flown through the identified model
+    with the probing it applied, would have left the robot too was not held: the policy is
+    slow (the finite-horizon optimum of a plant whose force is dear ends its legs short of
+    their window), and integral action armed there took ``controller_robustness``'s plant 10
+    to 1.07 of the optimum (1.003 without). A steady push holds the robot where the model
+    says it would not be, and still arms it."""
+    armed, ran_out = _slow_plant_armings(0.0)
+    assert ran_out >= 5      # the legs do run out short of their window
+    assert armed == 0
+    armed, _ = _slow_plant_armings(30.0)
+    assert armed >= 1
