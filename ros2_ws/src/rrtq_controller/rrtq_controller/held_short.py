@@ -75,8 +75,17 @@ noisy, delayed sinusoid (seed 3) the robot touched an obstacle, 0.9 mm deep, 0.3
 integral action armed on such a leg. Nor does a leg on which the safety brake acted arm
 it: the brake, not a push, stopped the robot short (after a brake were 12 of 159 armings
 on the robot-side rows at 304c4b6; the rover under white 0.5 m/s², seed 8, flew its last
-ten legs at 1.243 of the optimum). Nor is a robot no policy has yet driven through a leg
-(the controller decides, :meth:`rrtq_controller.q_learning.QLearningController.start_leg`):
+ten legs at 1.243 of the optimum). Nor is a robot that ended its leg where its own policy
+would have taken it (the controller decides,
+:meth:`rrtq_controller.q_learning.QLearningController.start_leg`): the leg's start flown
+through the observer's identified model by the gains and the probing the leg applied, no
+push, no friction, against where the robot stood at the leg's last step; held only where the
+two lie farther apart than the window ρ D0 (a difference the leg would accept is none). The
+finite-horizon optimum of a plant whose force is dear (R large), or that
+is heavy and lightly damped, ends its legs short of their window by design, and integral
+action armed there drove it on: ``controller_robustness``, 22 of 40 random plants within
+5 % of the Riccati policy at e34d154 against 40 of 40 without integral action. Nor is a
+robot no policy has yet driven through a leg:
 before any leg has completed, a leg that ran its horizon arms integral action only where
 the robot ended it at rest (the mean of its last readings below the brake's rest speed,
 or under odometry noise below what that many readings of a robot at rest show with

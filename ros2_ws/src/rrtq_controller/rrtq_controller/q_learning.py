@@ -141,7 +141,7 @@ class QLearningController(PolicyIteration):
         self._braked_in_leg = False
         """Whether the brake acted in this leg (its running out arms no integral action)."""
         self._leg_x0: Array | None = None
-        """x̄0 of the current leg (or horizon), for :meth:`_short_of_own_policy`."""
+        """x̄0 of the current leg (or horizon), for :meth:`_off_own_policy`."""
         self._leg_gains: list[Array] = []
         """The actor's gain K̂(τ) at each step of the current leg so far (its policy as it
         flew the leg: the actor moves toward each adopted target within a leg)."""
@@ -222,8 +222,8 @@ class QLearningController(PolicyIteration):
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
             retry = ran_out
             if ran_out:
-                held = (self._short_of_own_policy() if self._completed is not None
-                        else self._at_rest_at_last_leg_end())
+                held = self._off_own_policy() and (self._completed is not None
+                                                        or self._at_rest_at_last_leg_end())
             entered = not ran_out if completed is None else completed
             if entered:
                 self.completed_leg()
@@ -252,10 +252,10 @@ class QLearningController(PolicyIteration):
         # a leg the keep-off or the brake acted on was held by the safety shell, not short:
         # it arms nothing. Otherwise a leg that ran out was held where its robot ended
         # farther from its target than its own policy would have taken it (the policy may
-        # be slow: :meth:`_short_of_own_policy`) or, before any policy completed a leg,
-        # where the robot ended it at rest: the initial policy's probing walks a robot
-        # about, and friction or a push holds it still (integral action armed on a probing
-        # walk would take over from a learner that has not started)
+        # be slow: :meth:`_off_own_policy`) and, before any policy completed a leg,
+        # at rest: the initial policy's probing walks a robot about, and friction or a push
+        # holds it still (integral action armed on a probing walk would take over from a
+        # learner that has not started)
         armed = (retry and held and not self._braking and not self._kept_in_leg
                  and not self._braked_in_leg)
         self._kept_in_leg = self._braked_in_leg = False
@@ -268,17 +268,20 @@ class QLearningController(PolicyIteration):
             self._note(PolicyEvent.HELD_SHORT,
                        'the last leg ran its horizon short of its window: integral action')
 
-    def _short_of_own_policy(self) -> bool:
-        """Whether the leg that ran out ended short of where its own policy would have taken it.
+    def _off_own_policy(self) -> bool:
+        """Whether the leg that ran out ended elsewhere than its own policy would have taken it.
 
-        Its start x̄0 flown by the actors' gain K̂(τ) through the observer's identified model
-        (:func:`rollout.fly`: no push, no friction, no noise) to the leg's last step, against
-        where the robot was then: held, when it stood farther from its target, D = ‖x̄‖ as the
-        window counts it, by more than the window ρ D0 -- a shortfall the leg itself would
-        accept is not a hold. A policy slower than the leg's window asks (the finite-horizon
-        optimum of a heavy plant with a dear force, R large, ends its horizon short of its
-        window; ``controller_robustness``) falls short where the model says it does, and
-        nothing is held; a push or friction holds the robot where the model does not. True
+        Its start x̄0 flown through the observer's identified model (:func:`rollout.fly`: no
+        push, no friction, no noise) by the actor's gain K̂(τ) at each of its steps, with the
+        probing and feed-forward it added, clipped at the limit, to the leg's last step,
+        against where the robot was then: held, when the two states lie farther apart than
+        the window ρ D0 (in x̄, as the window counts D): a difference the leg would accept
+        is not a hold. A policy slower than its window asks (the finite-horizon optimum of a
+        plant whose force is dear, R large, or that is heavy and lightly damped ends its
+        horizon short of its window) ends where the model says it does, and nothing held it;
+        a push or friction holds the robot where the model has it moving on. Either way
+        round: a model fitted to the noise of a robot friction held still (the zero gain's
+        20 N of probing against 39 N) has it drift off anywhere, and the robot stayed. True
         without a model (nothing to tell them apart by).
         """
         if self.observer is None or self.observer.model is None or self._prev is None:
@@ -289,11 +292,8 @@ class QLearningController(PolicyIteration):
             return True
         path = fly(self.observer.model, np.array(self._leg_gains[:steps]), self._leg_x0,
                    np.array(self._leg_open[:steps]), c.force_limit)
-        predicted = float(np.linalg.norm(path[-1]))
-        if not np.isfinite(predicted):
-            return True
-        actual = float(np.linalg.norm(self._prev[1]))
-        return actual - predicted > c.rho * float(np.linalg.norm(self._leg_x0))
+        apart = float(np.linalg.norm(self._prev[1] - path[-1]))
+        return not apart <= c.rho * float(np.linalg.norm(self._leg_x0))   # nan: apart
 
     def _at_rest_at_last_leg_end(self) -> bool:
         """Whether the robot ended the last leg at rest.
