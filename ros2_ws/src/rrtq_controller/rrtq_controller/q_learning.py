@@ -28,6 +28,7 @@ import math
 from collections import deque
 
 import numpy as np
+from scipy.stats import chi2
 from numpy.typing import NDArray
 
 from .basis import QuadraticBasis, TimeBasis
@@ -39,7 +40,7 @@ from .held_short import HeldShort
 from .push_feedforward import PushFeedforward
 from .policy_iteration import PolicyIteration
 from .probing import Probing
-from .rollout import fly
+from .rollout import fly, spread
 from .readout import _features
 from .stability import gain_warnings
 
@@ -146,7 +147,8 @@ class QLearningController(PolicyIteration):
         """The actor's gain K̂(τ) at each step of the current leg so far (its policy as it
         flew the leg: the actor moves toward each adopted target within a leg)."""
         self._leg_open: list[Array] = []
-        """N: the open-loop part of each of those steps' force (probing, a feed-forward)."""
+        """N: what each of those steps applied beyond the policy's feedback -K̂ x̄ (probing,
+        a feed-forward, integral action, friction compensation, a keep-off, saturation)."""
         self._leg_last: deque[Array] = deque()
         """The velocities of the current leg's last steps so far (at most the readings
         whose mean tells rest under the odometry's noise, :meth:`guard.Sensing.samples_for`)."""
@@ -168,6 +170,11 @@ class QLearningController(PolicyIteration):
                          if c.observes else None)
         """The one-step model the critic learns through (:mod:`observer`); None: the rows take
         the odometry and the commanded force as they are."""
+        self._identifier = (Observer(n, m, c.observer_lags, c.observer_memory, c.observer_ar,
+                                     velocity=slice(m, 2 * m) if n == 2 * m else None)
+                            if self.observer is None and c.integral_action else None)
+        """Without :attr:`observer` (a measured disturbance), the same identification for
+        integral action's arming alone (:meth:`_off_own_policy`); the critic does not see it."""
         law = c.push_feedforward_law
         self._canceller = (PushCanceller(m, c.dt, c.push_filter_time, FALSE_ALARM)
                            if c.cancels_push and law is PushLaw.CANCEL else None)
@@ -272,28 +279,50 @@ class QLearningController(PolicyIteration):
         """Whether the leg that ran out ended elsewhere than its own policy would have taken it.
 
         Its start x̄0 flown through the observer's identified model (:func:`rollout.fly`: no
-        push, no friction, no noise) by the actor's gain K̂(τ) at each of its steps, with the
-        probing and feed-forward it added, clipped at the limit, to the leg's last step,
-        against where the robot was then: held, when the two states lie farther apart than
-        the window ρ D0 (in x̄, as the window counts D): a difference the leg would accept
-        is not a hold. A policy slower than its window asks (the finite-horizon optimum of a
-        plant whose force is dear, R large, or that is heavy and lightly damped ends its
-        horizon short of its window) ends where the model says it does, and nothing held it;
-        a push or friction holds the robot where the model has it moving on. Either way
-        round: a model fitted to the noise of a robot friction held still (the zero gain's
-        20 N of probing against 39 N) has it drift off anywhere, and the robot stayed. True
-        without a model (nothing to tell them apart by).
+        push, no friction, no noise) by the actor's gain K̂(τ) at each of its steps, with all
+        the leg added to that feedback (probing, feed-forward, the integral force itself: a
+        force armed and left out would set the two apart and arm it again and again),
+        clipped at the limit, to the leg's last step, against where the robot was then:
+        held, when the two states lie farther apart than the window ρ D0 (in x̄, as the
+        window counts D: a difference the leg would accept is not a hold) and than the
+        steps' unexplained part (the model's residual covariance, as white noise, through
+        the same closed loop: :func:`rollout.spread`) and the odometry's noise explain, at
+        :data:`guard.FALSE_ALARM` (1 %, χ² on the squared Mahalanobis distance).
+
+        A policy slower than its window asks (the finite-horizon optimum of a plant whose
+        force is dear, R large, or that is heavy and lightly damped ends its horizon short
+        of its window) ends where the model says it does, and nothing held it; a push or
+        friction holds the robot where the model has it moving on. Either way round: a
+        model fitted to the noise of a robot friction held still (the zero gain's 20 N of
+        probing against 39 N) has it drift off anywhere, and the robot stayed. On a light,
+        lightly damped plant with a slow policy a white push walks the robot farther than
+        the window over a horizon: without the noise test integral action armed there
+        (seven times on ``controller_robustness``'s plant 37) and drove it on. True without
+        a model (nothing to tell them apart by). Without the critic's observer (a measured
+        disturbance) the model is :attr:`_identifier`'s.
         """
-        if self.observer is None or self.observer.model is None or self._prev is None:
+        observer = self.observer
+        if observer is None and self._identifier is not None:
+            observer = self._identifier
+            observer.update()
+        if observer is None or observer.model is None or self._prev is None:
             return True
         c = self.config
         steps = int(round((self._prev_t - self._t0) / c.dt))
         if steps < 1 or self._leg_x0 is None or len(self._leg_gains) < steps:
             return True
-        path = fly(self.observer.model, np.array(self._leg_gains[:steps]), self._leg_x0,
-                   np.array(self._leg_open[:steps]), c.force_limit)
-        apart = float(np.linalg.norm(self._prev[1] - path[-1]))
-        return not apart <= c.rho * float(np.linalg.norm(self._leg_x0))   # nan: apart
+        gains = np.array(self._leg_gains[:steps])
+        path = fly(observer.model, gains, self._leg_x0, np.array(self._leg_open[:steps]),
+                   c.force_limit)
+        apart = self._prev[1] - path[-1]
+        if not np.all(np.isfinite(apart)):
+            return True
+        if float(np.linalg.norm(apart)) <= c.rho * float(np.linalg.norm(self._leg_x0)):
+            return False
+        # beyond what the unexplained part of each step and the odometry's noise make of it
+        cov = spread(observer.model, gains) + np.diag(observer.variance)
+        distance = float(apart @ np.linalg.pinv(cov) @ apart)
+        return not distance <= float(chi2.ppf(1.0 - FALSE_ALARM, apart.size))
 
     def _at_rest_at_last_leg_end(self) -> bool:
         """Whether the robot ended the last leg at rest.
@@ -336,8 +365,9 @@ class QLearningController(PolicyIteration):
         keep-offs allow for the velocity's (:class:`guard.Sensing`); zero: exact odometry.
         """
         variance = np.asarray(variance, dtype=float)
-        if self.observer is not None:
-            self.observer.variance = variance.copy()
+        for observer in (self.observer, self._identifier):
+            if observer is not None:
+                observer.variance = variance.copy()
         velocity = variance[2:2 + self.m]
         std = float(np.sqrt(velocity.mean())) if velocity.size else 0.0
         self.sensing.velocity_std = self._braking_sense.velocity_std = std
@@ -435,15 +465,15 @@ class QLearningController(PolicyIteration):
         # ∂u/∂x̄ of this step's force, for the observer: the actor's -K̂(τ) (the brake, the
         # keep-offs and integral action left out), none along a saturated axis
         sensitivity = np.zeros((self.m, x.size))
+        feedback = np.zeros(self.m)
         if self._braking:
             noise = np.zeros(self.m)
             self._held_short.drop()
             u = np.clip(self._brake(x, self.m), -limit, limit)
         else:
             sensitivity = self._policy_sensitivity(phi)
-            self._leg_gains.append(-sensitivity)
-            self._leg_open.append(noise + feedforward)
-            u = self._policy_u(phi, x) + noise + feedforward
+            feedback = self._policy_u(phi, x)
+            u = feedback + noise + feedforward
             held = self._held_short(x, grow=not self._keeping_off, time_left=tau)
             friction = self._friction_force(u + held, x)
             u = np.clip(u + _overcome(held, friction), -limit, limit)
@@ -456,6 +486,9 @@ class QLearningController(PolicyIteration):
                                  self._steady + feedforward), -limit, limit)
             else:
                 keep.release()
+        if not self._braking:   # what the leg applied beyond its policy's feedback
+            self._leg_gains.append(-sensitivity.copy())
+            self._leg_open.append(u - feedback)
         self._kept_in_leg = self._kept_in_leg or self._keeping_off
         self._braked_in_leg = self._braked_in_leg or self._braking
         self._leg_last.append(x[self.m:2 * self.m].copy())
@@ -476,6 +509,9 @@ class QLearningController(PolicyIteration):
             fits = not (self._braking and self.config.cancels_push)
             sensitivity[np.abs(u) >= limit] = 0.0
             self._step_id = self.observer.record(x, u, self._segment, fits, sensitivity)
+        elif self._identifier is not None:
+            sensitivity[np.abs(u) >= limit] = 0.0
+            self._identifier.record(x, u, self._segment, True, sensitivity)
         events, self._events = self._events, []
         self.info = StepInfo(tau=tau, e_c1=e_c1, e_c2=e_c2, e_a=e_a, e_d=e_d, probing=noise,
                              keep_off=self._keep_off.push + self._keep_ahead.push,

@@ -125,6 +125,22 @@ def fly(model: OneStepModel, gains: Array, x0: Array, inputs: Array | None = Non
     return out
 
 
+def spread(model: OneStepModel, gains: Array) -> Array:
+    """The covariance of x̄_S built up by the model's unexplained part e over a closed loop.
+
+    e white, ``residual_cov`` per step, through the closed loop of ``gains`` (S, m, n), from
+    a known start: (n, n).
+    """
+    n = model.phi.shape[0]
+    transitions = closed_loop(model, gains)
+    P = np.zeros(transitions.shape[1:])
+    with np.errstate(over='ignore', invalid='ignore'):
+        for T in transitions:
+            P = T @ P @ T.T
+            P[:n, :n] += model.residual_cov
+    return P[:n, :n]
+
+
 def worst_growth(transitions: Array, positions: int, start: int,
                  states: slice | None = None) -> Array:
     """‖Ψ(start → k)‖ for k = start+1 .. S: the position block, from rest (S - start,).
