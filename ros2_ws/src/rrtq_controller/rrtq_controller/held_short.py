@@ -82,13 +82,12 @@ through the observer's identified model by the gains and the probing the leg app
 push, no friction, against where the robot stood at the leg's last step; held only where the
 two lie farther apart than the window ρ D0 (a difference the leg would accept is none) and
 than the model's unexplained part and the odometry's noise explain at 1 %. The
-finite-horizon optimum of a plant whose force is dear (R large), or that
-is heavy and lightly damped, ends its legs short of their window by design, and integral
-action armed there drove it on: ``controller_robustness``, 22 of 40 random plants within
-5 % of the Riccati policy at e34d154 against 40 of 40 without integral action (39 of 40
-with this rule, 8c2290f). Nor is a
-robot no policy has yet driven through a leg:
-before any leg has completed, a leg that ran its horizon arms integral action only where
+finite-horizon optimum of a plant whose force is dear (R large), or that is heavy and
+lightly damped, ends its legs short of their window by design, and integral action armed
+there drove it on: ``controller_robustness``, 22 of 40 random plants within 5 % of the
+Riccati policy at e34d154 against 40 of 40 without integral action (39 of 40 with this
+rule, 8c2290f). Nor is a robot no policy has yet driven through a leg: before any leg has
+completed, a leg that ran its horizon arms integral action only where
 the robot ended it at rest (the mean of its last readings below the brake's rest speed,
 or under odometry noise below what that many readings of a robot at rest show with
 probability 1 %, enough of them to bring that down to the rest speed). The zero gain's

@@ -223,14 +223,20 @@ class QLearningController(PolicyIteration):
         watch measures from the reference leg's target, :class:`guard.DivergenceWatch`).
         """
         renew = True   # a fresh divergence reference: first leg, completed leg, a revert
-        retry = False  # the last leg ran its horizon short of its window
-        held = False   # and something held it there (see the arming below)
+        armed = False  # the last leg ran its horizon short of its window, held there
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
-            retry = ran_out
-            if ran_out:
-                held = self._off_own_policy() and (self._completed is not None
-                                                        or self._at_rest_at_last_leg_end())
+            # a leg the keep-off or the brake acted on was held by the safety shell, not
+            # short: it arms nothing. Otherwise a leg that ran out was held where its robot
+            # ended elsewhere than its own policy would have taken it (the policy may be
+            # slow: :meth:`_off_own_policy`) and, before any policy completed a leg, at rest:
+            # the initial policy's probing walks a robot about, and friction or a push holds
+            # it still (integral action armed on a probing walk would take over from a
+            # learner that has not started). The model's rollout last: it is the dearest
+            armed = (ran_out and not self._braking and not self._kept_in_leg
+                     and not self._braked_in_leg
+                     and (self._completed is not None or self._at_rest_at_last_leg_end())
+                     and self._off_own_policy())
             entered = not ran_out if completed is None else completed
             if entered:
                 self.completed_leg()
@@ -256,24 +262,19 @@ class QLearningController(PolicyIteration):
                           None if moved is None else np.asarray(moved, dtype=float))
         self._held = False   # a brake goes on (:meth:`step`)
         self._probing_u.start_leg(np.asarray(x0_bar, dtype=float))
-        # a leg the keep-off or the brake acted on was held by the safety shell, not short:
-        # it arms nothing. Otherwise a leg that ran out was held where its robot ended
-        # farther from its target than its own policy would have taken it (the policy may
-        # be slow: :meth:`_off_own_policy`) and, before any policy completed a leg,
-        # at rest: the initial policy's probing walks a robot about, and friction or a push
-        # holds it still (integral action armed on a probing walk would take over from a
-        # learner that has not started)
-        armed = (retry and held and not self._braking and not self._kept_in_leg
-                 and not self._braked_in_leg)
         self._kept_in_leg = self._braked_in_leg = False
         self._leg_last.clear()
-        self._leg_x0 = np.array(x0_bar, dtype=float)
-        self._leg_gains.clear()
-        self._leg_open.clear()
+        self._record_leg_from(x0_bar)
         self._held_short.start_leg(np.asarray(x0_bar, dtype=float), armed)
         if armed and self._held_short.active:
             self._note(PolicyEvent.HELD_SHORT,
                        'the last leg ran its horizon short of its window: integral action')
+
+    def _record_leg_from(self, x0_bar: Array) -> None:
+        """Start recording a leg (or horizon) from x̄0 for :meth:`_off_own_policy`."""
+        self._leg_x0 = np.array(x0_bar, dtype=float)
+        self._leg_gains.clear()
+        self._leg_open.clear()
 
     def _off_own_policy(self) -> bool:
         """Whether the leg that ran out ended elsewhere than its own policy would have taken it.
@@ -350,9 +351,7 @@ class QLearningController(PolicyIteration):
         """
         self._t0 = float(t)
         self._prev = None
-        self._leg_x0 = np.array(x0_bar, dtype=float)
-        self._leg_gains.clear()
-        self._leg_open.clear()
+        self._record_leg_from(x0_bar)
         self._segment += 1
         self._watch.start(np.asarray(x0_bar, dtype=float))
         self._probing_u.follow_line(np.asarray(x0_bar, dtype=float))
@@ -487,7 +486,7 @@ class QLearningController(PolicyIteration):
             else:
                 keep.release()
         if not self._braking:   # what the leg applied beyond its policy's feedback
-            self._leg_gains.append(-sensitivity.copy())
+            self._leg_gains.append(-sensitivity)
             self._leg_open.append(u - feedback)
         self._kept_in_leg = self._kept_in_leg or self._keeping_off
         self._braked_in_leg = self._braked_in_leg or self._braking
@@ -500,6 +499,7 @@ class QLearningController(PolicyIteration):
             self._d_out = self._policy_d(phi, x) + self._noise_d
         self._prev = (tau, x, u)  # the applied force: the rows stay right when u saturates
         self._prev_t = float(t)
+        sensitivity[np.abs(u) >= limit] = 0.0
         if self.observer is not None:
             # with the feed-forward, the model is not identified from a braked step. The brake
             # holds the robot against the push, a force that cancels the push step by step (a
@@ -507,10 +507,8 @@ class QLearningController(PolicyIteration):
             # model fitted across a hold took a spring the rover has not (256 N/m), through
             # which it read a 580 N push at rest; the rows still learn from the step
             fits = not (self._braking and self.config.cancels_push)
-            sensitivity[np.abs(u) >= limit] = 0.0
             self._step_id = self.observer.record(x, u, self._segment, fits, sensitivity)
         elif self._identifier is not None:
-            sensitivity[np.abs(u) >= limit] = 0.0
             self._identifier.record(x, u, self._segment, True, sensitivity)
         events, self._events = self._events, []
         self.info = StepInfo(tau=tau, e_c1=e_c1, e_c2=e_c2, e_a=e_a, e_d=e_d, probing=noise,
