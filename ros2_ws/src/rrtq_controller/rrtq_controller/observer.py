@@ -609,7 +609,7 @@ class Observer:
         """
         n = self.n
         R = np.diag(np.maximum(self.variance, 1e-12))
-        Pp = solve_discrete_are(model.phi.T, np.eye(n), Q, R)   # predicted covariance
+        Pp = _predicted_covariance(model.phi, Q, R)
         K = Pp @ np.linalg.inv(Pp + R)
         Pf = (np.eye(n) - K) @ Pp
         C = Pf @ model.phi.T @ np.linalg.inv(Pp)
@@ -635,6 +635,31 @@ class Observer:
             i = starts[live] + k
             smoothed[i] = filtered[i] + (smoothed[i + 1] - predicted[i + 1]) @ C.T
         return smoothed
+
+
+def _predicted_covariance(phi: Array, Q: Array, R: Array, steps: int = 1000) -> Array:
+    """The steady predicted covariance of the Kalman filter of x' = Φx + w (Q), y = x + v (R).
+
+    The discrete algebraic Riccati equation (scipy). Its Schur method fails on a model fitted
+    to little motion, whose Φ is nearly defective ("reordering ... failed": seen on this
+    controller's noisy, conveyed-robot test on one machine's LAPACK and not another's); the
+    Riccati recursion from Q then gives the same covariance where it converges (the state
+    is measured whole, so (Φ, I) is detectable and it does), and after ``steps`` steps
+    otherwise, more than any segment the smoother runs over (at most a horizon).
+    """
+    try:
+        solved = solve_discrete_are(phi.T, np.eye(phi.shape[0]), Q, R)
+        if np.all(np.isfinite(solved)):
+            return np.asarray(solved, dtype=float)
+    except (ValueError, np.linalg.LinAlgError):
+        pass
+    P: Array = np.array(Q, dtype=float)
+    for _ in range(steps):
+        after = np.asarray(phi @ (P - P @ np.linalg.solve(P + R, P)) @ phi.T + Q, dtype=float)
+        if np.allclose(after, P, rtol=1e-10, atol=1e-14):
+            return after
+        P = after
+    return P
 
 
 class PushCanceller:

@@ -285,3 +285,36 @@ def test_a_singular_ar_fit_falls_back_to_least_squares(monkeypatch):
     fallback = observer_module._ar_coefficients(e, usable, 2)
     assert np.allclose(fallback, expected, atol=1e-9)
     assert fallback == pytest.approx([1.2, -0.5], abs=0.1)
+
+
+def _riccati_residual(phi: np.ndarray, Q: np.ndarray, R: np.ndarray, P: np.ndarray) -> float:
+    """Relative residual of the filter's Riccati equation P = Φ(P - P(P + R)⁻¹P)Φᵀ + Q."""
+    after = phi @ (P - P @ np.linalg.solve(P + R, P)) @ phi.T + Q
+    return float(np.abs(after - P).max() / max(np.abs(P).max(), 1e-300))
+
+
+def test_the_smoothers_covariance_survives_a_nearly_defective_model():
+    """A model fitted to a robot that hardly moved (one position row zero, the velocity rows
+    nearly dependent): scipy's Schur method raised "reordering failed" on it on one machine,
+    inside the controller's step. The covariance is still the Riccati equation's fixed point
+    (checked by its residual, not by the code under test), finite and positive semidefinite;
+    on a well-conditioned model it is scipy's solution."""
+    from scipy.linalg import solve_discrete_are
+    phi = np.array([[0.999998268673021, 0.0, 3.9088478778394653e-07, 1.8253403689009712e-06],
+                    [0.0, 0.0, 0.0, 0.0],
+                    [2.3343723920356884e-04, 0.0, -2.1445893190252859e-02, 5.2085258517212622e-02],
+                    [3.5674135683035855e-04, 0.0, -2.2220938279334970e-03, 4.3423983020616360e-03]])
+    Q = np.array([[1.5236221793117192e-07, 0.0, 1.6751752800173855e-04, -7.7984672879079093e-05],
+                  [0.0, 1e-12, 0.0, 0.0],
+                  [1.6751752800173852e-04, 0.0, 4.1549099511337984e-01, -1.8774764637254945e-01],
+                  [-7.7984672879079079e-05, 0.0, -1.8774764637254945e-01, 8.4899158618194068e-02]])
+    R = np.diag([1e-12, 1e-12, 2.5e-3, 2.5e-3])
+    P = observer_module._predicted_covariance(phi, Q, R)
+    assert np.all(np.isfinite(P)) and np.allclose(P, P.T, atol=1e-12)
+    assert np.linalg.eigvalsh(0.5 * (P + P.T)).min() >= -1e-12
+    assert _riccati_residual(phi, Q, R, P) < 1e-6
+    A, B = ref.rover(mass=40.0, stiffness=0.0, damping=45.0)
+    phi_good = np.eye(4) + 0.05 * A
+    Q_good, R_good = 1e-3 * np.eye(4), np.diag([4e-4, 4e-4, 2.5e-3, 2.5e-3])
+    assert np.allclose(observer_module._predicted_covariance(phi_good, Q_good, R_good),
+                       solve_discrete_are(phi_good.T, np.eye(4), Q_good, R_good), rtol=1e-8)
