@@ -66,14 +66,22 @@ Two rules keep it from doing harm where the hold is gone or changes with the dir
   moving, carries nothing and waits a horizon there. A retry toward the same waypoint
   keeps what it has.
 
-A robot the safety shell holds is not held short: while a keep-off pushes (it pushed on
-the last step) the force does not grow, and a leg on which a keep-off pushed arms nothing
-when it runs its horizon. Without that, a robot held in an obstacle's keep-off zone short
-of a waypoint past its face armed integral action each horizon and grew it to the
-actuator's limit against the keep-off (``test_held_short``), and on ``robot_side``'s
-noisy, delayed sinusoid (seed 3) the robot touched an obstacle, 0.9 mm deep, 0.3 s after
-integral action armed on such a leg. Nor does a leg on which the safety brake acted arm
-it: the brake, not a push, stopped the robot short (after a brake were 12 of 159 armings
+The safety shell owns the direction into an obstacle it keeps the robot off: while a
+keep-off pushes (it pushed on the last step) the force grows by no part toward that
+obstacle, only along its face or away from it. A leg on which a keep-off pushed arms
+integral action only where the model's rollout (below) shows it ended elsewhere than its
+own policy, keep-off forces included, would have taken it; without a model to tell, such
+a leg arms nothing. Earlier a keep-off leg armed nothing at all and the force did not
+grow while a keep-off pushed: that left a robot a push held short *along* an obstacle's
+face where it stood (``robot_side``'s field bump, seed 9: 2.4 m short of its waypoint for
+320 s, the keep-off pushing on 60-80 % of the steps against the bump's part toward the
+face, the part along it holding the robot off its waypoint as F_d / K_p; reached at
+128.6 s now). And before that, without either rule, a robot held in an obstacle's
+keep-off zone short of a waypoint past its face armed integral action each horizon and
+grew it to the actuator's limit against the keep-off (``test_held_short``), and on
+``robot_side``'s noisy, delayed sinusoid (seed 3) the robot touched an obstacle, 0.9 mm
+deep, 0.3 s after integral action armed on such a leg. Nor does a leg on which the safety
+brake acted arm it: the brake, not a push, stopped the robot short (after a brake were 12 of 159 armings
 on the robot-side rows at 304c4b6; the rover under white 0.5 m/s², seed 8, flew its last
 ten legs at 1.243 of the optimum). Nor is a robot that ended its leg where its own policy
 would have taken it (the controller decides,
@@ -115,6 +123,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -183,12 +192,15 @@ class HeldShort:
         self.active = False
         self._recent.clear()
 
-    def __call__(self, x_bar: Array, grow: bool = True, time_left: float | None = None) -> Array:
+    def __call__(self, x_bar: Array, blocked: Sequence[Array] = (),
+                 time_left: float | None = None) -> Array:
         """N (m,): the integral force for this step at state x̄.
 
-        ``grow`` false: something else holds the robot this step (the safety shell's
-        keep-off pushed on the last one): the force keeps its value and does not grow.
-        ``time_left``: s, the leg's time to go τ (None: a whole horizon).
+        ``blocked``: the unit normals n (from the obstacle toward the robot) a keep-off of
+        the safety shell pushed along on the last step. The shell owns that direction: the
+        force grows by no part toward such an obstacle (held against its face is not held
+        short), only along it or away. ``time_left``: s, the leg's time to go τ (None: a
+        whole horizon).
         """
         if not self.active:
             return self.force
@@ -214,8 +226,13 @@ class HeldShort:
         gain = np.maximum(np.sign(toward) * (velocity - self._recent[0])
                           - self.sensing.difference, 0.0) * self.horizon / (lag * self.dt)
         held = np.abs(velocity) + gain + Z_FALSE_ALARM * self.sensing.velocity_std < needed
-        if grow and held.any():
-            grown = self.force + np.where(held, self.rate * self.dt * toward, 0.0)
+        step = np.where(held, self.rate * self.dt * toward, 0.0)
+        for n in blocked:                # no growth toward an obstacle the shell keeps off
+            into = float(step @ n)
+            if into < 0.0:
+                step = step - into * np.asarray(n, dtype=float)
+        if step.any():
+            grown = self.force + step
             size = float(np.linalg.norm(grown))
             self.force = grown if size <= self.limit else grown * (self.limit / size)
         return self.force

@@ -138,7 +138,8 @@ class QLearningController(PolicyIteration):
                                      sensing=self.sensing)
         """Integral action on a leg retried toward the waypoint the last one ran out on."""
         self._kept_in_leg = False
-        """Whether a keep-off pushed in this leg (its running out arms no integral action)."""
+        """Whether a keep-off pushed in this leg (its running out arms integral action only
+        where the model's rollout tells, :meth:`_off_own_policy`)."""
         self._braked_in_leg = False
         """Whether the brake acted in this leg (its running out arms no integral action)."""
         self._leg_x0: Array | None = None
@@ -226,17 +227,17 @@ class QLearningController(PolicyIteration):
         armed = False  # the last leg ran its horizon short of its window, held there
         if self.leg_index >= 0:
             ran_out = t - self._t0 >= self.config.horizon - 0.5 * self.config.dt
-            # a leg the keep-off or the brake acted on was held by the safety shell, not
-            # short: it arms nothing. Otherwise a leg that ran out was held where its robot
-            # ended elsewhere than its own policy would have taken it (the policy may be
-            # slow: :meth:`_off_own_policy`) and, before any policy completed a leg, at rest:
+            # a leg the brake acted on was held by the safety shell, not short: it arms
+            # nothing. Otherwise a leg that ran out was held where its robot ended elsewhere
+            # than its own policy would have taken it (the policy may be slow; the keep-offs'
+            # forces are in the rollout, and a leg they acted on arms nothing without a
+            # model: :meth:`_off_own_policy`) and, before any policy completed a leg, at rest:
             # the initial policy's probing walks a robot about, and friction or a push holds
             # it still (integral action armed on a probing walk would take over from a
             # learner that has not started). The model's rollout last: it is the dearest
-            armed = (ran_out and not self._braking and not self._kept_in_leg
-                     and not self._braked_in_leg
+            armed = (ran_out and not self._braking and not self._braked_in_leg
                      and (self._completed is not None or self._at_rest_at_last_leg_end())
-                     and self._off_own_policy())
+                     and self._off_own_policy(unknown=not self._kept_in_leg))
             entered = not ran_out if completed is None else completed
             if entered:
                 self.completed_leg()
@@ -276,8 +277,10 @@ class QLearningController(PolicyIteration):
         self._leg_gains.clear()
         self._leg_open.clear()
 
-    def _off_own_policy(self) -> bool:
+    def _off_own_policy(self, unknown: bool = True) -> bool:
         """Whether the leg that ran out ended elsewhere than its own policy would have taken it.
+
+        ``unknown``: the answer where there is nothing to tell by (no model, no record).
 
         Its start x̄0 flown through the observer's identified model (:func:`rollout.fly`: no
         push, no friction, no noise) by the actor's gain K̂(τ) at each of its steps, with all
@@ -298,8 +301,8 @@ class QLearningController(PolicyIteration):
         probing against 39 N) has it drift off anywhere, and the robot stayed. On a light,
         lightly damped plant with a slow policy a white push walks the robot farther than
         the window over a horizon: without the noise test integral action armed there
-        (seven times on ``controller_robustness``'s plant 37) and drove it on. True without
-        a model (nothing to tell them apart by). Without the critic's observer (a measured
+        (seven times on ``controller_robustness``'s plant 37) and drove it on. ``unknown``
+        without a model (nothing to tell them apart by). Without the critic's observer (a measured
         disturbance) the model is :attr:`_identifier`'s.
         """
         observer = self.observer
@@ -307,17 +310,17 @@ class QLearningController(PolicyIteration):
             observer = self._identifier
             observer.update()
         if observer is None or observer.model is None or self._prev is None:
-            return True
+            return unknown
         c = self.config
         steps = int(round((self._prev_t - self._t0) / c.dt))
         if steps < 1 or self._leg_x0 is None or len(self._leg_gains) < steps:
-            return True
+            return unknown
         gains = np.array(self._leg_gains[:steps])
         path = fly(observer.model, gains, self._leg_x0, np.array(self._leg_open[:steps]),
                    c.force_limit)
         apart = self._prev[1] - path[-1]
         if not np.all(np.isfinite(apart)):
-            return True
+            return unknown
         if float(np.linalg.norm(apart)) <= c.rho * float(np.linalg.norm(self._leg_x0)):
             return False
         # beyond what the unexplained part of each step and the odometry's noise make of it
@@ -473,7 +476,8 @@ class QLearningController(PolicyIteration):
             sensitivity = self._policy_sensitivity(phi)
             feedback = self._policy_u(phi, x)
             u = feedback + noise + feedforward
-            held = self._held_short(x, grow=not self._keeping_off, time_left=tau)
+            held = self._held_short(x, blocked=[k.normal for k in (self._keep_off, self._keep_ahead)
+                                                  if k.normal is not None], time_left=tau)
             friction = self._friction_force(u + held, x)
             u = np.clip(u + _overcome(held, friction), -limit, limit)
         velocity = x[2:2 + self.m]

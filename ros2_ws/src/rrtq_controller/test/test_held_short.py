@@ -311,16 +311,22 @@ def test_toward_the_next_waypoint_the_force_starts_from_zero_and_integral_action
     assert not held.active and not held.force.any()
 
 
+def _riccati_driver(integral: bool):
+    """The driver held at the rover's Riccati gain (no learning, no probing), integral action
+    on or off, and the rover it drives."""
+    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=_riccati_gain(),
+                              alpha_a=1e-9, probing_std=0.0, force_limit=LIMIT,
+                              integral_action=integral)
+    driver = LearningDriver(config, 4, 2, 0, np.random.default_rng(0))
+    return driver, ref.Plant(*ref.rover(mass=MASS, stiffness=0.0, damping=DAMPING), DT)
+
+
 def _against_a_face(face: float, seconds: float = 40.0):
     """The driver (Riccati gain, integral action on) toward (5, 0) with an obstacle's face
     across its way at x = ``face`` (the safety node's nearest: distance, the unit normal
     toward the robot): how often the guard said held_short, the closest approach (m) and
     the largest integral force (N)."""
-    config = ControllerConfig(M=10.0, R=0.02, P_T=0.5, initial_gain=_riccati_gain(),
-                              alpha_a=1e-9, probing_std=0.0, force_limit=LIMIT,
-                              integral_action=True)
-    driver = LearningDriver(config, 4, 2, 0, np.random.default_rng(0))
-    plant = ref.Plant(*ref.rover(mass=MASS, stiffness=0.0, damping=DAMPING), DT)
+    driver, plant = _riccati_driver(True)
     x = np.zeros(4)
     driver.set_plan([[5.0, 0.0]], x, 0.0)
     held, closest, biggest = 0, math.inf, 0.0
@@ -343,6 +349,44 @@ def test_a_robot_the_keep_off_holds_off_an_obstacle_is_not_held_short():
     held, closest, biggest = _against_a_face(4.5)
     assert held == 0 and biggest == 0.0
     assert closest > 0.0
+
+
+def _along_a_wall(integral: bool, seconds: float = 40.0):
+    """The driver (Riccati gain, integral action on or off) to (3, 0), then on to (8, 0)
+    along a wall at y = -0.3 (the nearest obstacle: distance, the unit normal toward the
+    robot). Past x = 3.5 a steady push of 40 N back along the way and 15 N into the wall
+    holds it, as a field bump pressed robot_side's seed 9 along an obstacle's face. Returns
+    the held_short events that armed on a leg the keep-off pushed in, the closest approach
+    to the wall (m) and the robot's least distance from (8, 0) (m)."""
+    driver, plant = _riccati_driver(integral)
+    x = np.zeros(4)
+    driver.set_plan([[3.0, 0.0], [8.0, 0.0]], x, 0.0)
+    armed, closest, least = 0, math.inf, math.inf
+    for k in range(int(seconds / DT)):
+        driver.nearest = (x[1] + 0.3, np.array([0.0, 1.0]))
+        kept = driver.controller._kept_in_leg
+        out = driver.step(k * DT, x)
+        armed += kept and 'held_short' in out.policy_event
+        push = np.array([-40.0, -15.0]) if x[0] > 3.5 else np.zeros(2)
+        x = plant.step(x, out.u + push)
+        closest = min(closest, x[1] + 0.3)
+        least = min(least, float(np.linalg.norm(x[:2] - [8.0, 0.0])))
+    return armed, closest, least
+
+
+def test_a_robot_pressed_against_a_wall_and_held_short_along_it_gets_there():
+    """The keep-off holds the robot off the wall, and the push along the wall holds it short
+    of its waypoint (F_d / K_p: ground truth from scipy's Riccati gain). The safety shell
+    owns the direction into the wall, not the one along it: integral action arms on the
+    legs the keep-off pushed in (they ended elsewhere than the policy's own flight through
+    the identified model, keep-off forces included) and grows along the wall, and the robot
+    reaches its waypoint without touching. Without integral action it stays short by
+    F_d / K_p (robot_side's field bump, seed 9, held 2.4 m short for 320 s so, when a leg
+    the keep-off acted in armed nothing)."""
+    armed, closest, least = _along_a_wall(True)
+    assert armed >= 1 and closest > 0.0 and least < RHO * 1.0
+    _, _, least_off = _along_a_wall(False)
+    assert least_off > 0.8 * 40.0 / float(_riccati_gain()[0, 0])
 
 
 def _zero_gain_legs(friction: float, seed: int, seconds: float = 35.0, velocity_std: float = 0.0):

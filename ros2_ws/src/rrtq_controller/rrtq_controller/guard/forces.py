@@ -261,6 +261,9 @@ class KeepOff:
     """The approach speed a at the last pushing step (None: not pushing)."""
     push: float = 0.0
     """N: how much the last step raised the command along n (0: not acting)."""
+    normal: Array | None = None
+    """The unit vector n (from the obstacle to the robot) it pushed along on the last step
+    (None: it did not push)."""
     sensing: Sensing = field(default_factory=Sensing)
     """Odometry noise and actuation delay the rules allow for (:class:`Sensing`)."""
     _recent: deque[float] = field(default_factory=deque)
@@ -305,7 +308,7 @@ class KeepOff:
         if not (distance < self.reach(v, n)) or float(n @ n) < 0.5:
             self.release()                         # out of reach (or no direction)
             return u
-        self.push = 0.0
+        self.push, self.normal = 0.0, None
         a = -float(v @ n)
         inside = distance < self.zone
         want = -math.inf
@@ -359,7 +362,7 @@ class KeepOff:
         along = float(u @ n)
         if along >= want:
             return u
-        self.push = want - along
+        self.push, self.normal = want - along, n.copy()
         return np.asarray(u + self.push * n, dtype=float)
 
     def _creeping(self, a: float) -> bool:
@@ -395,7 +398,7 @@ class KeepOff:
 
     def release(self) -> None:
         """Out of the zone: no push, and the next engagement starts afresh."""
-        self.force, self.prev, self.push = 0.0, None, 0.0
+        self.force, self.prev, self.push, self.normal = 0.0, None, 0.0, None
         self._recent.clear()
         self._creep.clear()
         self._wait = 0
