@@ -81,9 +81,9 @@ keep-off zone short of a waypoint past its face armed integral action each horiz
 grew it to the actuator's limit against the keep-off (``test_held_short``), and on
 ``robot_side``'s noisy, delayed sinusoid (seed 3) the robot touched an obstacle, 0.9 mm
 deep, 0.3 s after integral action armed on such a leg. Nor does a leg on which the safety
-brake acted arm it: the brake, not a push, stopped the robot short (after a brake were 12 of 159 armings
-on the robot-side rows at 304c4b6; the rover under white 0.5 m/s², seed 8, flew its last
-ten legs at 1.243 of the optimum). Nor is a robot that ended its leg where its own policy
+brake acted arm it: the brake, not a push, stopped the robot short (after a brake were 12
+of 159 armings on the robot-side rows at 304c4b6; the rover under white 0.5 m/s², seed 8,
+flew its last ten legs at 1.243 of the optimum). Nor is a robot that ended its leg where its own policy
 would have taken it (the controller decides,
 :meth:`rrtq_controller.q_learning.QLearningController.start_leg`): the leg's start flown
 through the observer's identified model by the gains and the probing the leg applied, no

@@ -384,9 +384,12 @@ class QLearningController(PolicyIteration):
         self._adopted_since = self._spared = False
 
     @property
-    def _keeping_off(self) -> bool:
-        """Whether a keep-off pushed on the last step (integral action does not grow then)."""
-        return self._keep_off.push != 0.0 or self._keep_ahead.push != 0.0
+    def _kept_off_from(self) -> list[Array]:
+        """The unit normals (obstacle to robot) the keep-offs pushed along on the last step.
+
+        Empty where none pushed; integral action grows by no part toward those obstacles.
+        """
+        return [k.normal for k in (self._keep_off, self._keep_ahead) if k.normal is not None]
 
     def time_to_go(self, t: float) -> float:
         """τ = T - (t - t_leg), s, clipped at 0."""
@@ -476,8 +479,7 @@ class QLearningController(PolicyIteration):
             sensitivity = self._policy_sensitivity(phi)
             feedback = self._policy_u(phi, x)
             u = feedback + noise + feedforward
-            held = self._held_short(x, blocked=[k.normal for k in (self._keep_off, self._keep_ahead)
-                                                  if k.normal is not None], time_left=tau)
+            held = self._held_short(x, blocked=self._kept_off_from, time_left=tau)
             friction = self._friction_force(u + held, x)
             u = np.clip(u + _overcome(held, friction), -limit, limit)
         velocity = x[2:2 + self.m]
@@ -492,7 +494,7 @@ class QLearningController(PolicyIteration):
         if not self._braking:   # what the leg applied beyond its policy's feedback
             self._leg_gains.append(-sensitivity)
             self._leg_open.append(u - feedback)
-        self._kept_in_leg = self._kept_in_leg or self._keeping_off
+        self._kept_in_leg = self._kept_in_leg or bool(self._kept_off_from)
         self._braked_in_leg = self._braked_in_leg or self._braking
         self._leg_last.append(x[self.m:2 * self.m].copy())
         while len(self._leg_last) > self.sensing.samples_for(self._brake.rest_speed):
