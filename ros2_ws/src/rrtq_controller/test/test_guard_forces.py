@@ -126,12 +126,13 @@ def test_keep_off_stops_an_approach_before_contact_within_the_limit(mass, dampin
     assert abs(x[2]) <= 0.05                              # held off, at rest along n
 
 
-def _approach(lead, mass, damping, limit, v0, start=1.5, seconds=8.0):
+def _approach(lead, mass, damping, limit, v0, start=1.5, seconds=8.0, step_gain=0.0):
     """A rover ``start`` m from a wall (x = 0) approaching it at v0 while its policy pushes
-    it on at a fifth of the limit. Returns (closest distance, largest |u|, final x)."""
+    it on at a fifth of the limit; the keep-off told the input gain or not (0). Returns
+    (closest distance, largest |u|, final x)."""
     A, B = ref.rover(mass=mass, stiffness=0.0, damping=damping)
     plant = ref.Plant(A, B, DT)
-    keep = KeepOff(zone=0.3, limit=limit, dt=DT, lead=lead)
+    keep = KeepOff(zone=0.3, limit=limit, dt=DT, lead=lead, step_gain=step_gain)
     x = np.array([-start, 0.0, v0, 0.1])
     policy = np.array([0.2 * limit, 3.0])
     closest, umax = start, 0.0
@@ -157,6 +158,61 @@ def test_keep_off_looks_ahead_of_its_zone_at_the_approach_speed(mass, damping, l
     assert abs(x[2]) <= 0.05
     if mass > 100.0:
         assert _approach(0.0, mass, damping, limit, v0)[0] <= 0.0
+
+
+def _oblique(step_gain, mass=110.0, damping=15.0, limit=200.0, push=55.0, seconds=6.0):
+    """A rover 0.6 m from a wall (x = 0) running at it at 0.93 m/s, 1.0 m/s along it (47°
+    off head-on), while a push it does not measure (``push`` N, 45° to the wall, as the
+    diagonal sinusoid of robot_side) presses it on; the keep-off told the input gain (m/s
+    per N per step) or not (0). The closest distance."""
+    A, B = ref.rover(mass=mass, stiffness=0.0, damping=damping)
+    plant = ref.Plant(A, B, DT)
+    keep = KeepOff(zone=0.3, limit=limit, dt=DT, lead=1.0)
+    keep.step_gain = step_gain
+    x = np.array([-0.6, 0.0, 0.93, 1.0])
+    f = push * np.array([1.0, 1.0]) / math.sqrt(2.0)
+    closest = 0.6
+    for _ in range(int(seconds / DT)):
+        u = np.clip(keep(np.zeros(2), x[2:], -x[0], np.array([-1.0, 0.0]), lambda: 40.0),
+                    -limit, limit)
+        x = plant.step(x, u + f)
+        closest = min(closest, -x[0])
+    return closest
+
+
+def test_keep_off_looks_ahead_of_an_oblique_approach_the_zone_cannot_stop():
+    """Seen on a 110 kg rover at 200 N under a diagonal 0.1 Hz sinusoid (robot_side, seed
+    3): it ran at the world's boundary at 0.9 m/s; the keep-off looked a second ahead and
+    pushed, but the push along the boundary turned the heading past 45°, where the
+    keep-off looks no farther than its 0.3 m zone (obliquely a robot mostly slides past a
+    corner), and let go; it took the robot again in the zone, at 0.93 m/s, and the robot
+    crossed the boundary by 0.018 m (from there against the push it needs 0.30 m at the
+    limit, more with the ramp from the probing scale). Knowing the input gain (the
+    observer's), the keep-off finds that the zone cannot stop the approach and looks
+    ahead however oblique it is: the robot stays off. The 40 kg rover at 1000 N is
+    stopped by the zone from the same approach, and the zone alone answers it."""
+    gain = DT / 110.0
+    assert _oblique(0.0) <= 0.0                          # the 45° rule alone: through the wall
+    assert _oblique(gain) > 0.05
+    keep = KeepOff(zone=0.3, limit=200.0, dt=DT, lead=1.0, step_gain=gain)
+    assert keep.stop_distance(0.93, 40.0, 39.0) > 0.3
+    light = KeepOff(zone=0.3, limit=1000.0, dt=DT, lead=1.0, step_gain=DT / 40.0)
+    assert light.stop_distance(0.93, 40.0) < 0.3
+    assert light.stop_distance(3.0, 40.0) > 0.3
+
+
+def test_keep_off_looks_as_far_ahead_as_a_fast_heavy_robot_needs_to_stop():
+    """Seen on the same rover: a policy ran it at 5 m/s at the boundary, and the keep-off,
+    looking a second ahead (5 m), began to push where the robot needed 7 m to stop at the
+    limit; it crossed by 0.09 m. Knowing the input gain, it looks as far as the push at its
+    fastest needs: the robot stops at the zone's edge. Looking a second ahead only, it
+    crosses by 0.6 m."""
+    closest = {}
+    for gain in (0.0, DT / 110.0):
+        closest[gain], umax, x = _approach(1.0, 110.0, 15.0, 200.0, 5.0, start=8.0, seconds=10.0,
+                                           step_gain=gain)
+        assert umax <= 200.0
+    assert closest[0.0] < 0.0 and closest[DT / 110.0] > 0.2
 
 
 def test_keep_off_ahead_of_its_zone_leaves_an_approach_alone_that_slows_in_time():
