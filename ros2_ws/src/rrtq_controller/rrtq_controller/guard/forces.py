@@ -247,7 +247,9 @@ class KeepOff:
     * once the observer knows the input gain (:attr:`step_gain`), also as far ahead as the
       push at its fastest needs to stop the approach (:meth:`stop_distance`, from the
       speed it will have at the zone under the steady push, :meth:`entry_speed`), and
-      however oblique the approach, where the zone alone cannot stop it: a 110 kg rover at
+      however oblique the approach, where the zone alone cannot stop it or where it is
+      pushing already (it holds on through an approach that turns oblique under its push,
+      rather than letting go and taking the robot again in the zone): a 110 kg rover at
       200 N crossed the world's boundary by 0.018 m, 47° off head-on at 0.93 m/s under a
       55 N diagonal sinusoid, and by 0.09 m head-on at 5 m/s (it needs 7 m to stop; a
       second ahead is 5 m). On the 40 kg rover at 1000 N the zone stops any approach up to
