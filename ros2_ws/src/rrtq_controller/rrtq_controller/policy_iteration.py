@@ -21,7 +21,7 @@ from scipy.stats import norm
 from .bellman import Policy, bellman_rows
 from .config import SafeHold
 from .critic import Fit, LeastSquaresCritic, fit, residual
-from .guard import FALSE_ALARM, Brake, KeepOff, PolicyEvent, Sensing, held_below, trust_step
+from .guard import FALSE_ALARM, Brake, PolicyEvent, Sensing, held_below, trust_step
 from .observer import Observer, PushCanceller
 from .push_feedforward import PushFeedforward
 from .readout import WeightReadout
@@ -64,8 +64,6 @@ class PolicyIteration(WeightReadout):
     _full_legs: int
     _braking: bool
     _brake: Brake
-    _keep_off: KeepOff
-    _keep_ahead: KeepOff
     _brake_started: float
     _brake_until: float
     _events: list[tuple[PolicyEvent, str]]
@@ -124,9 +122,8 @@ class PolicyIteration(WeightReadout):
             model = self.observer.model
             self.sensing.dead_steps = self._braking_sense.dead_steps = model.delay
             velocity_rows = model.gamma[2:2 + self.m]
-            self._braking_sense.step_gain = (float(np.linalg.norm(velocity_rows, 2))
-                                             if velocity_rows.size else 0.0)
-            self._keep_off.step_gain = self._keep_ahead.step_gain = self._braking_sense.step_gain
+            self.sensing.step_gain = self._braking_sense.step_gain = (
+                float(np.linalg.norm(velocity_rows, 2)) if velocity_rows.size else 0.0)
             # the last second's steady push, where it stands out of the noise (guard.KeepOff)
             mean, error = self.observer.steady_push(max(int(round(1.0 / self.config.dt)), 2))
             z = float(norm.ppf(1.0 - FALSE_ALARM / 2))

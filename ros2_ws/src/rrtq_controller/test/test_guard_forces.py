@@ -132,7 +132,7 @@ def _approach(lead, mass, damping, limit, v0, start=1.5, seconds=8.0, step_gain=
     (closest distance, largest |u|, final x)."""
     A, B = ref.rover(mass=mass, stiffness=0.0, damping=damping)
     plant = ref.Plant(A, B, DT)
-    keep = KeepOff(zone=0.3, limit=limit, dt=DT, lead=lead, step_gain=step_gain)
+    keep = KeepOff(zone=0.3, limit=limit, dt=DT, lead=lead, sensing=Sensing(step_gain=step_gain))
     x = np.array([-start, 0.0, v0, 0.1])
     policy = np.array([0.2 * limit, 3.0])
     closest, umax = start, 0.0
@@ -167,8 +167,7 @@ def _oblique(step_gain, mass=110.0, damping=15.0, limit=200.0, push=55.0, second
     per N per step) or not (0). The closest distance."""
     A, B = ref.rover(mass=mass, stiffness=0.0, damping=damping)
     plant = ref.Plant(A, B, DT)
-    keep = KeepOff(zone=0.3, limit=limit, dt=DT, lead=1.0)
-    keep.step_gain = step_gain
+    keep = KeepOff(zone=0.3, limit=limit, dt=DT, lead=1.0, sensing=Sensing(step_gain=step_gain))
     x = np.array([-0.6, 0.0, 0.93, 1.0])
     f = push * np.array([1.0, 1.0]) / math.sqrt(2.0)
     closest = 0.6
@@ -194,9 +193,9 @@ def test_keep_off_looks_ahead_of_an_oblique_approach_the_zone_cannot_stop():
     gain = DT / 110.0
     assert _oblique(0.0) <= 0.0                          # the 45° rule alone: through the wall
     assert _oblique(gain) > 0.05
-    keep = KeepOff(zone=0.3, limit=200.0, dt=DT, lead=1.0, step_gain=gain)
+    keep = KeepOff(zone=0.3, limit=200.0, dt=DT, lead=1.0, sensing=Sensing(step_gain=gain))
     assert keep.stop_distance(0.93, 40.0, 39.0) > 0.3
-    light = KeepOff(zone=0.3, limit=1000.0, dt=DT, lead=1.0, step_gain=DT / 40.0)
+    light = KeepOff(zone=0.3, limit=1000.0, dt=DT, lead=1.0, sensing=Sensing(step_gain=DT / 40.0))
     assert light.stop_distance(0.93, 40.0) < 0.3
     assert light.stop_distance(3.0, 40.0) > 0.3
 

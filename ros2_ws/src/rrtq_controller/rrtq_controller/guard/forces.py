@@ -244,7 +244,7 @@ class KeepOff:
       heavy robot cannot stop within the zone from the speed it may enter it at (120 kg at
       150 N stops from 0.8 m/s in 0.26 m at the limit, and the push ramps up from the
       probing scale first: seen touching an obstacle 5 mm deep);
-    * once the observer knows the input gain (:attr:`step_gain`), also as far ahead as the
+    * once the observer knows the input gain (:attr:`Sensing.step_gain`), also as far ahead as the
       push at its fastest needs to stop the approach (:meth:`stop_distance`, from the
       speed it will have at the zone under the steady push, :meth:`entry_speed`), and
       however oblique the approach, where the zone alone cannot stop it or where it is
@@ -285,10 +285,8 @@ class KeepOff:
 
     head_on: float = math.cos(math.pi / 4.0)
     """The look-ahead is for approaches within 45° of head-on (a >= this |v|), and for any
-    approach the zone cannot stop (:meth:`stop_distance`)."""
-    step_gain: float = 0.0
-    """m/s per N: the most one step of force changes the velocity (the observer's input
-    gain, :attr:`Sensing.step_gain`); 0: not known (then ``lead`` and the 45° rule alone)."""
+    approach the zone cannot stop (:meth:`stop_distance`; without the input gain,
+    :attr:`Sensing.step_gain`, ``lead`` and this rule alone)."""
 
     def reach(self, velocity: Array, direction: Array) -> float:
         """m: the distance within which it acts, ``zone`` + ``lead`` times the approach speed.
@@ -319,11 +317,13 @@ class KeepOff:
         u = np.asarray(u, dtype=float)
         n = np.asarray(direction, dtype=float)[:u.size]
         v = np.asarray(velocity, dtype=float)[:u.size]
+        a = -float(v @ n)
+        # the steady push toward the obstacle, N: the zone cancels it, the look-ahead counts it
         toward = max(0.0, -float(np.asarray(steady, dtype=float)[:u.size] @ n)) \
             if steady is not None else 0.0
         reach = self.reach(v, n)
-        entry = self.entry_speed(-float(v @ n), distance, toward)
-        if not distance < reach and self.step_gain > 0.0 and entry > 0.0:
+        entry = self.entry_speed(a, distance, toward)
+        if not distance < reach and self.sensing.step_gain > 0.0 and entry > 0.0:
             stop = self.stop_distance(entry, scale(), toward)
             if stop >= self.zone or self.force > 0.0:   # the zone alone cannot stop it
                 reach = self.zone + max(self.lead * entry, stop)
@@ -331,12 +331,10 @@ class KeepOff:
             self.release()                         # out of reach (or no direction)
             return u
         self.push, self.normal = 0.0, None
-        a = -float(v @ n)
         inside = distance < self.zone
         want = -math.inf
         if inside:                                 # in the zone: no force toward it, nor push
-            want = max(0.0, -float(np.asarray(steady, dtype=float)[:u.size] @ n)
-                       if steady is not None else 0.0)
+            want = toward
         # an approach noise cannot have made is answered in full (with exact odometry, any)
         sense, rest = self.sensing, self.sensing.rest(0.0)
         lag, noise = sense.lag, sense.difference
@@ -390,7 +388,7 @@ class KeepOff:
     def entry_speed(self, a: float, distance: float, toward: float = 0.0) -> float:
         """m/s: the speed an approach at a (m/s), ``distance`` (m) out, has at the zone's edge.
 
-        Under a steady push ``toward`` the obstacle (N), through :attr:`step_gain`; a where
+        Under a steady push ``toward`` the obstacle (N), through :attr:`Sensing.step_gain`; a where
         that is not known, or inside the zone; 0 moving away. An approach a push presses on
         is watched to the speed it will have: a keep-off that let go of a 110 kg rover
         slowed to 0.45 m/s 0.78 m out (beyond 0.3 m + 1 s at that speed) took it again in
@@ -399,26 +397,27 @@ class KeepOff:
         gap = distance - self.zone
         if a <= 0.0:
             return 0.0
-        if self.step_gain <= 0.0 or gap <= 0.0 or toward <= 0.0:
+        gain = self.sensing.step_gain
+        if gain <= 0.0 or gap <= 0.0 or toward <= 0.0:
             return a
-        return math.sqrt(a * a + 2.0 * toward * self.step_gain / self.dt * gap)
+        return math.sqrt(a * a + 2.0 * toward * gain / self.dt * gap)
 
     def stop_distance(self, a: float, start: float, toward: float = 0.0) -> float:
         """m: the least way an approach at a (m/s) goes on under this rule's pushes.
 
         The push at its fastest: nothing for the actuation delay, then ``start`` (N) doubled
         every lag (:attr:`Sensing.lag`) up to ``limit``, less ``toward`` (N, a steady push
-        toward the obstacle), each step taking its force times :attr:`step_gain` off the
+        toward the obstacle), each step taking its force times :attr:`Sensing.step_gain` off the
         approach speed. 0 where the input gain is not known; inf where the push cannot
         stop the approach within a minute.
 
         Where this reaches beyond the zone, the zone alone cannot stop the approach and the
         look-ahead acts however oblique it is: a 110 kg rover at 200 N, pushed by a 55 N
-        sinusoid, ran at a boundary 46° off head-on at 0.89 m/s and crossed it by 0.018 m
-        (it needs 0.30 m at the limit, 0.43 m with the ramp from the probing scale; the zone
-        is 0.3 m). On the 40 kg rover at 1000 N the zone stops an approach up to 1.5 m/s.
+        sinusoid, ran at a boundary 47° off head-on at 0.93 m/s and crossed it by 0.018 m
+        (it needs 0.30 m at the limit, 0.39 m with the ramp from the probing scale; the zone
+        is 0.3 m). On the 40 kg rover at 1000 N the zone stops an approach up to 1.6 m/s.
         """
-        gain = self.step_gain
+        gain = self.sensing.step_gain
         if gain <= 0.0 or a <= 0.0:
             return 0.0
         lag, dead = self.sensing.lag, self.sensing.dead_steps
